@@ -1,0 +1,261 @@
+//! Timings of the core (`infotrack bench`): the particle filter step and the EER cycle, on
+//! the paper's scenario, single-threaded. The criterion benches in `benches/` time the same
+//! fixtures.
+
+use std::time::Instant;
+
+use rand::SeedableRng;
+use serde::Serialize;
+
+use crate::config::Config;
+use crate::estimation::{FilterParams, ParticleFilter};
+use crate::guidance::{EerParams, EerPlanner};
+use crate::metrics::median;
+use crate::motion::ConstantVelocity;
+use crate::rng::CoreRng;
+use crate::world::geometry::Enu2;
+use crate::world::World;
+
+/// A filter mid-run on the lab scenario: `n` particles that have tracked a target for a few
+/// seconds with intermittent measurements, so resampling and negative information both occur.
+pub struct PfFixture {
+    /// Configuration used.
+    pub cfg: Config,
+    /// The world.
+    pub world: World,
+    /// The filter.
+    pub pf: ParticleFilter,
+    /// Its motion model.
+    pub model: ConstantVelocity,
+    /// Random stream.
+    pub rng: CoreRng,
+    k: u64,
+}
+
+impl PfFixture {
+    /// Builds the fixture and warms the filter up.
+    pub fn new(n: usize, seed: u64) -> Self {
+        let mut cfg = Config::default_lab();
+        cfg.filter.particles = n;
+        let world = World::from_config(&cfg);
+        let mut rng = CoreRng::seed_from_u64(seed);
+        let pf = ParticleFilter::new(FilterParams::from_config(&cfg), cfg.workspace_enu, &mut rng);
+        let model = ConstantVelocity::new(cfg.motion.cv_max_speed_mps, cfg.filter_dt_s());
+        let mut f = Self {
+            cfg,
+            world,
+            pf,
+            model,
+            rng,
+            k: 0,
+        };
+        for _ in 0..30 {
+            f.step();
+        }
+        f
+    }
+
+    /// The true target of step k: a circle through open floor and one occlusion.
+    fn target(k: u64) -> Enu2 {
+        let a = k as f64 * 0.05;
+        Enu2::new(-1.0 + 0.9 * a.cos(), 0.4 + 0.9 * a.sin())
+    }
+
+    /// One filter step; measured on two steps out of three.
+    pub fn step(&mut self) {
+        self.k += 1;
+        let t = Self::target(self.k);
+        let agent = t + Enu2::new(0.1, 0.0);
+        let z = (self.k % 3 != 0 && !self.world.is_occluded(&t))
+            .then(|| self.world.measurement.measure(&t, &mut self.rng));
+        self.pf
+            .step(&mut self.model, z, &agent, &self.world, &mut self.rng)
+            .expect("the constant-velocity model cannot fail");
+    }
+}
+
+/// An EER planner with its inputs prepared (the rollout done), ready to time `decide`.
+pub struct EerFixture {
+    /// The filter fixture (N = 500).
+    pub pf: PfFixture,
+    /// The planner.
+    pub planner: EerPlanner,
+    /// Agent position for candidate generation.
+    pub agent_enu: Enu2,
+}
+
+impl EerFixture {
+    /// N = `n` particles, N_H = `n_h`, K = 4.
+    pub fn new(n: usize, n_h: usize, seed: u64) -> Self {
+        let mut pf = PfFixture::new(n, seed);
+        let mut cfg = pf.cfg.clone();
+        cfg.guidance.entropy_particles = n_h;
+        cfg.guidance.horizon_steps = 4;
+        let mut planner = EerPlanner::new(EerParams::from_config(&cfg));
+        planner
+            .prepare(&pf.pf, &mut pf.model, &pf.world, &mut pf.rng)
+            .expect("cv cannot fail");
+        let agent_enu = Enu2::new(-1.0, 0.4);
+        Self {
+            pf,
+            planner,
+            agent_enu,
+        }
+    }
+
+    /// The rollout (motion-model calls, process noise, simulated measurements).
+    pub fn prepare(&mut self) {
+        let p = &mut self.pf;
+        self.planner
+            .prepare(&p.pf, &mut p.model, &p.world, &mut p.rng)
+            .expect("cv cannot fail");
+    }
+
+    /// Candidates, EER of each, argmax; returns the candidate count.
+    pub fn decide(&mut self) -> usize {
+        self.planner
+            .decide(&self.agent_enu, &self.pf.world)
+            .candidates
+    }
+}
+
+fn time_median(reps: usize, mut f: impl FnMut()) -> f64 {
+    let mut t = Vec::with_capacity(reps);
+    for _ in 0..reps {
+        let s = Instant::now();
+        f();
+        t.push(s.elapsed().as_secs_f64() * 1e3);
+    }
+    median(&t)
+}
+
+/// PF step medians.
+#[derive(Debug, Clone, Serialize)]
+pub struct PfTimes {
+    /// N = 500, ms.
+    pub n500: f64,
+    /// N = 5000, ms.
+    pub n5000: f64,
+}
+
+/// EER cycle medians (motion-model calls excluded).
+#[derive(Debug, Clone, Serialize)]
+pub struct EerTimes {
+    /// N_H = 25, ms.
+    pub nh25: f64,
+    /// N_H = 100, ms.
+    pub nh100: f64,
+    /// N_H = 500, ms.
+    pub nh500: f64,
+}
+
+/// Rollout medians (the motion-model part of the cycle, constant-velocity model).
+#[derive(Debug, Clone, Serialize)]
+pub struct RolloutTimes {
+    /// N_H = 25, ms.
+    pub nh25: f64,
+    /// N_H = 100, ms.
+    pub nh100: f64,
+    /// N_H = 500, ms.
+    pub nh500: f64,
+}
+
+/// What `infotrack bench` measures.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    /// PF step, ms.
+    pub pf_step_ms: PfTimes,
+    /// EER cycle without the motion model, ms.
+    pub eer_cycle_ms: EerTimes,
+    /// Candidates per EER cycle at N_H = 500.
+    pub eer_candidates: usize,
+    /// The K-step rollout with the constant-velocity model, ms.
+    pub eer_rollout_cv_ms: RolloutTimes,
+    /// Repetitions per median.
+    pub repetitions: usize,
+}
+
+/// Runs the timings on the current thread.
+pub fn run(repetitions: usize, seed: u64) -> BenchReport {
+    let pf_time = |n: usize| {
+        let mut f = PfFixture::new(n, seed);
+        time_median(repetitions, || f.step())
+    };
+    let mut candidates = 0;
+    let mut eer = |n_h: usize| {
+        let mut f = EerFixture::new(500, n_h, seed);
+        let reps = repetitions.min(200);
+        let decide = time_median(reps, || {
+            candidates = f.decide();
+        });
+        let prepare = time_median(reps, || f.prepare());
+        (decide, prepare)
+    };
+    let (e25, r25) = eer(25);
+    let (e100, r100) = eer(100);
+    let (e500, r500) = eer(500);
+    BenchReport {
+        pf_step_ms: PfTimes {
+            n500: pf_time(500),
+            n5000: pf_time(5000),
+        },
+        eer_cycle_ms: EerTimes {
+            nh25: e25,
+            nh100: e100,
+            nh500: e500,
+        },
+        eer_candidates: candidates,
+        eer_rollout_cv_ms: RolloutTimes {
+            nh25: r25,
+            nh100: r100,
+            nh500: r500,
+        },
+        repetitions,
+    }
+}
+
+/// The report as a table, with the targets of the core issue beside the figures.
+pub fn render(r: &BenchReport) -> String {
+    format!(
+        "infotrack bench (one thread, medians of {} repetitions)\n\
+         {:<44} {:>10} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         {:<44} {:>10.4} {:>12}\n\
+         candidates per EER cycle (N_H = 500): {}\n",
+        r.repetitions,
+        "what",
+        "ms",
+        "target",
+        "PF step, N = 500, constant velocity",
+        r.pf_step_ms.n500,
+        "<= 0.3",
+        "PF step, N = 5000, constant velocity",
+        r.pf_step_ms.n5000,
+        "-",
+        "EER cycle, N = 500, N_H = 25, K = 4",
+        r.eer_cycle_ms.nh25,
+        "-",
+        "EER cycle, N = 500, N_H = 100, K = 4",
+        r.eer_cycle_ms.nh100,
+        "-",
+        "EER cycle, N = N_H = 500, K = 4",
+        r.eer_cycle_ms.nh500,
+        "<= 10",
+        "EER rollout (cv model), N_H = 25, K = 4",
+        r.eer_rollout_cv_ms.nh25,
+        "-",
+        "EER rollout (cv model), N_H = 100, K = 4",
+        r.eer_rollout_cv_ms.nh100,
+        "-",
+        "EER rollout (cv model), N_H = 500, K = 4",
+        r.eer_rollout_cv_ms.nh500,
+        "-",
+        r.eer_candidates
+    )
+}

@@ -1,0 +1,315 @@
+//! The TOML configuration: one struct per table, a doc comment on every field, and
+//! validation at load time so that a bad file fails before anything runs.
+//!
+//! Unknown keys are errors (`deny_unknown_fields`): a misspelt key must not silently
+//! fall back to a default.
+
+mod validate;
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::world::geometry::BoundsEnu;
+
+/// Why a configuration could not be loaded.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config file {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML, has an unknown key or a value of the wrong type.
+    #[error("config file {path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The parser's message, which names the key and the line.
+        message: String,
+    },
+    /// A value is out of range or inconsistent with another.
+    #[error("config key `{key}` = {value}: {reason}")]
+    Invalid {
+        /// Dotted path of the key, e.g. `filter.particles`.
+        key: String,
+        /// The offending value as written.
+        value: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+/// The whole configuration of a scenario and of the algorithms that run on it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Human-readable scenario name, printed in reports.
+    pub name: String,
+    /// Seed of every random choice when the command line gives none.
+    pub seed: u64,
+    /// Workspace: where particles live and the geofence the agent may fly in.
+    pub workspace_enu: BoundsEnu,
+    /// The target's road network (a Markov chain over nodes joined by straight edges).
+    pub road: RoadConfig,
+    /// Regions where the target cannot be seen (a union of polygons).
+    #[serde(default)]
+    pub occlusions: Vec<OcclusionConfig>,
+    /// The simulated target vehicle.
+    pub target: TargetConfig,
+    /// The simulated agent (multicopter).
+    pub agent: AgentConfig,
+    /// The downward camera.
+    pub camera: CameraConfig,
+    /// The measurement model z = x + N(0, R).
+    pub measurement: MeasurementConfig,
+    /// Loop rates and run length.
+    pub timing: TimingConfig,
+    /// The particle filter.
+    pub filter: FilterConfig,
+    /// Motion models the particle filter can predict with.
+    pub motion: MotionConfig,
+    /// The constant-velocity Kalman filter (estimation baseline and KF guidance).
+    pub kalman: KalmanConfig,
+    /// Guidance laws.
+    pub guidance: GuidanceConfig,
+}
+
+/// A node of the road network.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodeConfig {
+    /// Identifier that edges refer to.
+    pub id: u32,
+    /// East coordinate, metres.
+    pub x_m: f64,
+    /// North coordinate, metres.
+    pub y_m: f64,
+}
+
+/// A directed edge of the road network with its transition probability.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EdgeConfig {
+    /// Node the edge leaves.
+    pub from: u32,
+    /// Node the edge enters.
+    pub to: u32,
+    /// Probability of taking this edge when at `from`; the edges leaving a node sum to 1.
+    pub p: f64,
+}
+
+/// The road network as a Markov chain.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoadConfig {
+    /// Nodes with their positions.
+    pub nodes: Vec<NodeConfig>,
+    /// Directed edges with transition probabilities.
+    pub edges: Vec<EdgeConfig>,
+    /// Node the target starts at.
+    pub start_node: u32,
+}
+
+/// One occlusion region.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OcclusionConfig {
+    /// Optional label (a building, a tree line).
+    #[serde(default)]
+    pub name: String,
+    /// Polygon vertices `[x, y]` in the world ENU frame, metres, at least three.
+    pub vertices_enu_m: Vec<[f64; 2]>,
+}
+
+/// The simulated target: a unicycle that drives along the road network.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetConfig {
+    /// Speed when heading toward its goal, m/s.
+    pub cruise_speed_mps: f64,
+    /// Hard speed limit, m/s (the cruise speed is clipped to it).
+    pub max_speed_mps: f64,
+    /// Turn rate limit, rad/s.
+    pub max_yaw_rate_radps: f64,
+    /// Heading error above which the target stops and turns in place, radians.
+    pub turn_in_place_above_rad: f64,
+    /// Proportional heading gain, 1/s.
+    pub heading_gain_per_s: f64,
+    /// Distance to the current goal node at which the next goal is sampled, metres.
+    pub goal_switch_radius_m: f64,
+}
+
+/// The simulated agent: a multicopter at fixed altitude following position setpoints.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentConfig {
+    /// Flight altitude above the ground plane, metres.
+    pub altitude_m: f64,
+    /// Start position `[x, y]` in the world ENU frame, metres.
+    pub start_enu_m: [f64; 2],
+    /// Proportional gain from position error to velocity command, 1/s.
+    pub gain_per_s: f64,
+    /// Speed limit per axis, m/s.
+    pub speed_limit_mps: f64,
+    /// Acceleration limit (norm), m/s^2.
+    pub accel_limit_mps2: f64,
+    /// Position errors below this are treated as zero, metres.
+    pub dead_zone_m: f64,
+}
+
+/// The downward-looking camera.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraConfig {
+    /// Full horizontal field of view, radians (footprint width = 2 h tan(fov_x / 2)).
+    pub fov_x_rad: f64,
+    /// Full vertical field of view, radians.
+    pub fov_y_rad: f64,
+}
+
+/// The measurement model z = x + N(0, R).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementConfig {
+    /// Measurement noise covariance R (2x2, row-major), square metres.
+    pub noise_cov_m2: [[f64; 2]; 2],
+}
+
+/// Loop rates and run length.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimingConfig {
+    /// Particle filter (and measurement) rate, Hz; its period is the motion model's dt.
+    pub filter_hz: f64,
+    /// Guidance rate, Hz.
+    pub guidance_hz: f64,
+    /// Physics integration rate of the simulators, Hz.
+    pub physics_hz: f64,
+    /// Length of one run, seconds.
+    pub duration_s: f64,
+}
+
+/// The particle filter.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FilterConfig {
+    /// Number of particles N.
+    pub particles: usize,
+    /// Positions of history each particle carries (K_in of the learned model).
+    pub history_len: usize,
+    /// Process noise Q (2x2), square metres; the filter adds N(0, 2Q) after each prediction
+    /// as the paper's code does.
+    pub process_noise_cov_m2: [[f64; 2]; 2],
+    /// Resampling threshold a: resample when N_eff < a N.
+    pub resample_threshold: f64,
+    /// Re-seeding threshold b: re-seed around the recent measurements when
+    /// N_eff < b N and a measurement arrived.
+    pub reseed_threshold: f64,
+    /// Roughening constant: jitter sigma = constant x per-axis spread x N^(-1/3).
+    pub roughening: f64,
+    /// Likelihood of not detecting a target that is in view (negative information).
+    pub miss_probability: f64,
+    /// Re-draw every particle uniformly when more than this share leaves the workspace.
+    pub max_outside_fraction: f64,
+}
+
+/// Motion models of the particle filter.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionConfig {
+    /// Particle constant-velocity model: the largest speed a particle is given, m/s.
+    pub cv_max_speed_mps: f64,
+}
+
+/// The constant-velocity Kalman filter, state `[x, y, vx, vy]` in the world ENU frame.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KalmanConfig {
+    /// Diagonal of the process noise Q: m^2, m^2, (m/s)^2, (m/s)^2.
+    pub process_noise_diag: [f64; 4],
+    /// Diagonal of the initial covariance P0 (same units).
+    pub initial_cov_diag: [f64; 4],
+}
+
+/// The lawnmower (boustrophedon) sweep of the LAWN baseline.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LawnConfig {
+    /// x of each vertical leg, metres, in sweep order.
+    pub legs_x_m: Vec<f64>,
+    /// Southern end of the legs, metres.
+    pub y_min_m: f64,
+    /// Northern end of the legs, metres.
+    pub y_max_m: f64,
+    /// Distance between consecutive sweep points, metres.
+    pub point_spacing_m: f64,
+    /// A measurement younger than this is tracked instead of sweeping, seconds.
+    pub track_measurement_for_s: f64,
+}
+
+/// Guidance laws.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GuidanceConfig {
+    /// N_H: particles used for entropy and EER (drawn with replacement; N_H = N uses them all).
+    pub entropy_particles: usize,
+    /// N_M: simulated measurements per particle.
+    pub measurements_per_particle: usize,
+    /// K: planning horizon in filter steps.
+    pub horizon_steps: usize,
+    /// Side of the grid of reachable candidate waypoints (side x side points).
+    pub candidate_grid_side: usize,
+    /// Covariance of the Gaussian transition kernel p(x_i | x_j) in the entropy formulas,
+    /// square metres (the paper's code uses Q).
+    pub entropy_kernel_cov_m2: [[f64; 2]; 2],
+    /// The lawnmower sweep.
+    pub lawn: LawnConfig,
+}
+
+/// The lab scenario of the paper, compiled into the binary.
+pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
+
+impl Config {
+    /// Loads and validates a configuration file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Parses and validates TOML text; `origin` names the source in error messages.
+    pub fn from_toml_str(text: &str, origin: &Path) -> Result<Self, ConfigError> {
+        let cfg: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: origin.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The embedded default (the paper's lab scenario).
+    pub fn default_lab() -> Self {
+        Self::from_toml_str(DEFAULT_TOML, Path::new("<embedded config/default.toml>"))
+            .expect("the embedded default config is valid (checked by a unit test)")
+    }
+
+    /// Filter period dt = 1 / filter_hz, seconds.
+    pub fn filter_dt_s(&self) -> f64 {
+        1.0 / self.timing.filter_hz
+    }
+
+    /// Validates ranges and cross-references; the error names the key and the value.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        validate::validate(self)
+    }
+}
+
+#[cfg(test)]
+mod tests;

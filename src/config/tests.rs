@@ -1,0 +1,160 @@
+use std::path::Path;
+
+use super::*;
+
+fn load_modified(edit: impl Fn(&mut toml::Table)) -> Result<Config, ConfigError> {
+    let mut table: toml::Table = toml::from_str(DEFAULT_TOML).unwrap();
+    edit(&mut table);
+    let text = toml::to_string(&table).unwrap();
+    Config::from_toml_str(&text, Path::new("test.toml"))
+}
+
+fn expect_invalid(err: ConfigError, key_part: &str) {
+    match err {
+        ConfigError::Invalid { key, .. } => {
+            assert!(
+                key.contains(key_part),
+                "error names `{key}`, expected `{key_part}`"
+            )
+        }
+        other => panic!("expected Invalid naming {key_part}, got {other}"),
+    }
+}
+
+fn tbl<'a>(t: &'a mut toml::Table, k: &str) -> &'a mut toml::Table {
+    t.get_mut(k).unwrap().as_table_mut().unwrap()
+}
+
+#[test]
+fn embedded_default_is_valid_and_matches_the_paper() {
+    let c = Config::default_lab();
+    assert_eq!(c.filter.particles, 500);
+    assert_eq!(c.guidance.entropy_particles, 25);
+    assert_eq!(c.guidance.horizon_steps, 4);
+    assert_eq!(c.filter.history_len, 10);
+    assert_eq!(c.filter.resample_threshold, 0.99);
+    assert_eq!(c.filter.reseed_threshold, 0.4);
+    assert_eq!(c.occlusions.len(), 2);
+    // Footprint side as in the authors' code: tan(35 deg) * 1.2 m.
+    let side = 2.0 * c.agent.altitude_m * (0.5 * c.camera.fov_x_rad).tan();
+    assert!(
+        (side - 35f64.to_radians().tan() * 1.2).abs() < 1e-6,
+        "{side}"
+    );
+}
+
+#[test]
+fn outdoor_config_is_valid() {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml");
+    let c = Config::load(&p).unwrap();
+    assert!(c.workspace_enu.width_m() > 1000.0);
+    assert!(c.agent.altitude_m >= 30.0);
+}
+
+#[test]
+fn unknown_key_is_an_error_naming_it() {
+    let err = load_modified(|t| {
+        tbl(t, "filter").insert("particals".into(), toml::Value::Integer(3));
+    })
+    .unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("particals"), "{msg}");
+}
+
+#[test]
+fn zero_or_negative_particle_count_is_refused() {
+    let err = load_modified(|t| {
+        tbl(t, "filter").insert("particles".into(), toml::Value::Integer(0));
+    })
+    .unwrap_err();
+    expect_invalid(err, "filter.particles");
+    let err = load_modified(|t| {
+        tbl(t, "filter").insert("particles".into(), toml::Value::Integer(-5));
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("particles"), "{err}");
+}
+
+#[test]
+fn transition_row_not_summing_to_one_is_refused() {
+    let err = load_modified(|t| {
+        let road = tbl(t, "road");
+        let edges = road.get_mut("edges").unwrap().as_array_mut().unwrap();
+        edges[0]
+            .as_table_mut()
+            .unwrap()
+            .insert("p".into(), toml::Value::Float(0.5));
+    })
+    .unwrap_err();
+    expect_invalid(err, "from = 1");
+}
+
+#[test]
+fn edge_to_missing_node_is_refused() {
+    let err = load_modified(|t| {
+        let road = tbl(t, "road");
+        let edges = road.get_mut("edges").unwrap().as_array_mut().unwrap();
+        edges[2]
+            .as_table_mut()
+            .unwrap()
+            .insert("to".into(), toml::Value::Integer(42));
+    })
+    .unwrap_err();
+    expect_invalid(err, "road.edges[2].to");
+}
+
+#[test]
+fn occlusion_outside_workspace_is_refused() {
+    let err = load_modified(|t| {
+        let occ = t.get_mut("occlusions").unwrap().as_array_mut().unwrap();
+        let v: toml::Value =
+            toml::Value::try_from(vec![[10.0, 10.0], [11.0, 10.0], [11.0, 11.0]]).unwrap();
+        occ[0]
+            .as_table_mut()
+            .unwrap()
+            .insert("vertices_enu_m".into(), v);
+    })
+    .unwrap_err();
+    expect_invalid(err, "occlusions[0]");
+}
+
+#[test]
+fn footprint_larger_than_workspace_is_refused() {
+    let err = load_modified(|t| {
+        tbl(t, "agent").insert("altitude_m".into(), toml::Value::Float(50.0));
+    })
+    .unwrap_err();
+    expect_invalid(err, "camera.fov_x_rad");
+    assert!(err_string_contains_footprint(load_modified(|t| {
+        tbl(t, "agent").insert("altitude_m".into(), toml::Value::Float(50.0));
+    })));
+}
+
+fn err_string_contains_footprint(r: Result<Config, ConfigError>) -> bool {
+    r.unwrap_err().to_string().contains("footprint")
+}
+
+#[test]
+fn non_positive_definite_covariance_is_refused() {
+    let err = load_modified(|t| {
+        let v = toml::Value::try_from([[0.01, 0.2], [0.2, 0.01]]).unwrap();
+        tbl(t, "measurement").insert("noise_cov_m2".into(), v);
+    })
+    .unwrap_err();
+    expect_invalid(err, "measurement.noise_cov_m2");
+}
+
+#[test]
+fn reseed_threshold_above_resample_threshold_is_refused() {
+    let err = load_modified(|t| {
+        tbl(t, "filter").insert("reseed_threshold".into(), toml::Value::Float(0.995));
+    })
+    .unwrap_err();
+    expect_invalid(err, "filter.reseed_threshold");
+}
+
+#[test]
+fn missing_file_names_the_path() {
+    let err = Config::load(Path::new("/nonexistent/infotrack.toml")).unwrap_err();
+    assert!(err.to_string().contains("/nonexistent/infotrack.toml"));
+}

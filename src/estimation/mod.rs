@@ -1,0 +1,10 @@
+//! Target state estimation: the particle filter (with any [`crate::motion::MotionModel`])
+//! and the constant-velocity Kalman filter baseline.
+
+pub mod kalman;
+pub mod particle_filter;
+
+pub use kalman::KalmanFilter;
+pub use particle_filter::{
+    FilterCounters, FilterError, FilterParams, ParticleFilter, ResampleAction, StepReport,
+};

@@ -1,0 +1,512 @@
+//! The particle filter of the paper (Section III-B) with the authors' resampling scheme
+//! (thresholds a and b, roughening, re-seeding, uniform re-draw), implemented cleanly:
+//! a resampled particle carries its whole history and the weights reset to 1/N (the
+//! authors' code copied only the newest position and kept the old weights).
+
+use std::collections::VecDeque;
+
+use nalgebra::Matrix2;
+use rand::Rng;
+use rand_distr::{Distribution, Exp1, StandardNormal};
+use thiserror::Error;
+
+use crate::config::Config;
+use crate::motion::{Histories, MotionError, MotionModel};
+use crate::world::geometry::{BoundsEnu, Enu2};
+use crate::world::measurement::Gaussian2;
+use crate::world::World;
+
+/// Why a filter step failed.
+#[derive(Debug, Error)]
+pub enum FilterError {
+    /// The motion model failed.
+    #[error(transparent)]
+    Motion(#[from] MotionError),
+}
+
+/// The filter's parameters, from the configuration.
+#[derive(Debug, Clone)]
+pub struct FilterParams {
+    /// N.
+    pub particles: usize,
+    /// K_in.
+    pub history_len: usize,
+    /// Noise added after each prediction: N(0, 2Q).
+    pub process_noise: Gaussian2,
+    /// a.
+    pub resample_threshold: f64,
+    /// b.
+    pub reseed_threshold: f64,
+    /// Roughening constant.
+    pub roughening: f64,
+    /// p(no detection | target in view).
+    pub miss_probability: f64,
+    /// Uniform re-draw when more than this share is outside the workspace.
+    pub max_outside_fraction: f64,
+    /// Largest speed of the straight tracks drawn at (re-)initialisation, m/s.
+    pub init_speed_max_mps: f64,
+    /// Filter period, s.
+    pub dt_s: f64,
+}
+
+impl FilterParams {
+    /// From a validated configuration.
+    pub fn from_config(c: &Config) -> Self {
+        let q = c.filter.process_noise_cov_m2;
+        Self {
+            particles: c.filter.particles,
+            history_len: c.filter.history_len,
+            process_noise: Gaussian2::new([
+                [2.0 * q[0][0], 2.0 * q[0][1]],
+                [2.0 * q[1][0], 2.0 * q[1][1]],
+            ]),
+            resample_threshold: c.filter.resample_threshold,
+            reseed_threshold: c.filter.reseed_threshold,
+            roughening: c.filter.roughening,
+            miss_probability: c.filter.miss_probability,
+            max_outside_fraction: c.filter.max_outside_fraction,
+            init_speed_max_mps: c.motion.cv_max_speed_mps,
+            dt_s: c.filter_dt_s(),
+        }
+    }
+}
+
+/// What the filter did to its particle set in one step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResampleAction {
+    /// Kept the weighted set.
+    None,
+    /// Multinomial resampling and roughening (N_eff < a N).
+    Resampled,
+    /// Re-seeded around the recent measurements (N_eff < b N with a measurement).
+    Reseeded,
+    /// More than the allowed share left the workspace: re-drawn uniformly.
+    UniformRedraw,
+    /// The weights were degenerate (all zero or not finite): re-seeded or re-drawn.
+    Recovered,
+}
+
+/// The outcome of one step.
+#[derive(Debug, Clone, Copy)]
+pub struct StepReport {
+    /// Whether a measurement was used.
+    pub measured: bool,
+    /// N_eff after the update and before any resampling.
+    pub n_eff: f64,
+    /// What was done to the set.
+    pub action: ResampleAction,
+    /// Predictions the motion model returned as NaN or infinite (replaced by the last
+    /// position and counted; never taken in).
+    pub nonfinite_predictions: usize,
+}
+
+/// Counters over the filter's life, for logs and reports.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FilterCounters {
+    /// Steps run.
+    pub steps: u64,
+    /// Multinomial resamplings.
+    pub resamples: u64,
+    /// Re-seeds around measurements.
+    pub reseeds: u64,
+    /// Uniform re-draws after leaving the workspace.
+    pub uniform_redraws: u64,
+    /// Recoveries from degenerate weights.
+    pub recoveries: u64,
+    /// Non-finite model outputs rejected.
+    pub nonfinite_predictions: u64,
+}
+
+/// A particle filter whose particles each carry a history of their last K_in positions.
+#[derive(Debug, Clone)]
+pub struct ParticleFilter {
+    params: FilterParams,
+    workspace_enu: BoundsEnu,
+    histories: Histories,
+    weights: Vec<f64>,
+    /// Recent measurements with the step they arrived at, for re-seeding.
+    recent: VecDeque<(u64, Enu2)>,
+    step_index: u64,
+    counters: FilterCounters,
+    // Scratch buffers reused across steps.
+    predicted: Vec<Enu2>,
+    resampled: Histories,
+    indices: Vec<usize>,
+}
+
+impl ParticleFilter {
+    /// A filter with particles drawn uniformly over the workspace.
+    pub fn new<R: Rng + ?Sized>(
+        params: FilterParams,
+        workspace_enu: BoundsEnu,
+        rng: &mut R,
+    ) -> Self {
+        let n = params.particles;
+        let k = params.history_len;
+        let mut pf = Self {
+            histories: Histories::new(n, k),
+            weights: vec![1.0 / n as f64; n],
+            recent: VecDeque::with_capacity(k),
+            step_index: 0,
+            counters: FilterCounters::default(),
+            predicted: vec![Enu2::zeros(); n],
+            resampled: Histories::new(n, k),
+            indices: Vec::with_capacity(n),
+            params,
+            workspace_enu,
+        };
+        pf.redraw_uniform(rng);
+        pf
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &FilterParams {
+        &self.params
+    }
+
+    /// Particle histories.
+    pub fn histories(&self) -> &Histories {
+        &self.histories
+    }
+
+    /// Normalised weights.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Counters over the filter's life.
+    pub fn counters(&self) -> FilterCounters {
+        self.counters
+    }
+
+    /// Newest position of particle `i`, world ENU.
+    pub fn particle(&self, i: usize) -> Enu2 {
+        self.histories.newest(i)
+    }
+
+    /// Newest positions of all particles.
+    pub fn particles(&self) -> Vec<Enu2> {
+        (0..self.weights.len()).map(|i| self.particle(i)).collect()
+    }
+
+    /// Effective sample size 1 / sum w^2.
+    pub fn n_eff(&self) -> f64 {
+        1.0 / self.weights.iter().map(|w| w * w).sum::<f64>()
+    }
+
+    /// Weighted mean of the newest positions (the PFWM goal and the estimate).
+    pub fn mean(&self) -> Enu2 {
+        let mut m = Enu2::zeros();
+        for (i, w) in self.weights.iter().enumerate() {
+            m += *w * self.particle(i);
+        }
+        m
+    }
+
+    /// Weighted covariance sum_i w_i (x_i - mu)(x_i - mu)^T of the newest positions.
+    ///
+    /// The paper's eq. 16 prints an outer product of two sums, which is zero by
+    /// construction; this is the intended weighted covariance.
+    pub fn covariance(&self) -> Matrix2<f64> {
+        let mu = self.mean();
+        let mut c = Matrix2::zeros();
+        for (i, w) in self.weights.iter().enumerate() {
+            let d = self.particle(i) - mu;
+            c += *w * d * d.transpose();
+        }
+        c
+    }
+
+    /// One filter period: predict with `model`, update with `measurement` (or with negative
+    /// information from the footprint of an agent at `agent_enu` when there is none), then
+    /// resample as the thresholds say.
+    pub fn step<R: Rng + ?Sized>(
+        &mut self,
+        model: &mut dyn MotionModel,
+        measurement: Option<Enu2>,
+        agent_enu: &Enu2,
+        world: &World,
+        rng: &mut R,
+    ) -> Result<StepReport, FilterError> {
+        self.step_index += 1;
+        self.counters.steps += 1;
+        let nonfinite = self.predict(model, rng)?;
+        if let Some(z) = measurement {
+            if self.recent.len() == self.params.history_len {
+                self.recent.pop_front();
+            }
+            self.recent.push_back((self.step_index, z));
+        }
+        self.update(measurement, agent_enu, world);
+
+        let action = if !self.normalize() {
+            self.counters.recoveries += 1;
+            if measurement.is_some() {
+                tracing::warn!(
+                    step = self.step_index,
+                    "particle weights degenerate (all zero or not finite); re-seeding around the measurements"
+                );
+                self.reseed_around_measurements(world, rng);
+            } else {
+                tracing::warn!(
+                    step = self.step_index,
+                    "particle weights degenerate (all zero or not finite) with no measurement; re-drawing uniformly"
+                );
+                self.redraw_uniform(rng);
+            }
+            ResampleAction::Recovered
+        } else {
+            ResampleAction::None
+        };
+        let n_eff = self.n_eff();
+        let n = self.params.particles as f64;
+        let action = if action != ResampleAction::None {
+            action
+        } else if self.outside_fraction() > self.params.max_outside_fraction {
+            self.counters.uniform_redraws += 1;
+            self.redraw_uniform(rng);
+            ResampleAction::UniformRedraw
+        } else if n_eff < self.params.resample_threshold * n {
+            if measurement.is_some() && n_eff < self.params.reseed_threshold * n {
+                self.counters.reseeds += 1;
+                self.reseed_around_measurements(world, rng);
+                ResampleAction::Reseeded
+            } else {
+                self.counters.resamples += 1;
+                self.resample_multinomial(rng);
+                self.roughen(rng);
+                ResampleAction::Resampled
+            }
+        } else {
+            ResampleAction::None
+        };
+        Ok(StepReport {
+            measured: measurement.is_some(),
+            n_eff,
+            action,
+            nonfinite_predictions: nonfinite,
+        })
+    }
+
+    /// Prediction through the model, then N(0, 2Q). Returns how many outputs were rejected.
+    fn predict<R: Rng + ?Sized>(
+        &mut self,
+        model: &mut dyn MotionModel,
+        rng: &mut R,
+    ) -> Result<usize, FilterError> {
+        if let Some(k) = model.required_history_len() {
+            if k != self.params.history_len {
+                return Err(MotionError::HistoryLength {
+                    model: model.name().to_string(),
+                    expected: k,
+                    got: self.params.history_len,
+                }
+                .into());
+            }
+        }
+        model.predict(&self.histories, &mut self.predicted)?;
+        let mut nonfinite = 0;
+        for (i, p) in self.predicted.iter_mut().enumerate() {
+            if !(p.x.is_finite() && p.y.is_finite()) {
+                nonfinite += 1;
+                *p = self.histories.newest(i);
+            }
+            *p += self.params.process_noise.sample(rng);
+        }
+        if nonfinite > 0 {
+            self.counters.nonfinite_predictions += nonfinite as u64;
+            tracing::warn!(
+                model = model.name(),
+                count = nonfinite,
+                "motion model returned non-finite predictions; those particles held their last position"
+            );
+        }
+        self.histories.push(&self.predicted);
+        Ok(nonfinite)
+    }
+
+    fn update(&mut self, measurement: Option<Enu2>, agent_enu: &Enu2, world: &World) {
+        match measurement {
+            Some(z) => {
+                // Log-domain with the maximum subtracted: a measurement far from every
+                // particle must not underflow all weights to zero.
+                let lls: Vec<f64> = (0..self.weights.len())
+                    .map(|i| {
+                        world
+                            .measurement
+                            .log_likelihood(&z, &self.histories.newest(i))
+                    })
+                    .collect();
+                let max = lls.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+                for (w, ll) in self.weights.iter_mut().zip(&lls) {
+                    *w *= (ll - max).exp();
+                }
+            }
+            None => {
+                // Negative information: "not seen there" lowers the mass inside the view.
+                for i in 0..self.weights.len() {
+                    if world.is_visible(agent_enu, &self.histories.newest(i)) {
+                        self.weights[i] *= self.params.miss_probability;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Normalises the weights; false when they cannot be (all zero, or not finite).
+    fn normalize(&mut self) -> bool {
+        let s: f64 = self.weights.iter().sum();
+        if !(s.is_finite() && s > 0.0) || self.weights.iter().any(|w| !w.is_finite() || *w < 0.0) {
+            return false;
+        }
+        let inv = 1.0 / s;
+        self.weights.iter_mut().for_each(|w| *w *= inv);
+        true
+    }
+
+    fn outside_fraction(&self) -> f64 {
+        let n = self.weights.len();
+        let outside = (0..n)
+            .filter(|&i| !self.workspace_enu.contains(&self.histories.newest(i)))
+            .count();
+        outside as f64 / n as f64
+    }
+
+    /// Multinomial resampling in O(N): sorted uniforms from normalised exponential spacings,
+    /// walked against the cumulative weights. Whole histories are copied; weights reset.
+    fn resample_multinomial<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+        let n = self.weights.len();
+        // u_(k) = S_k / S_{n+1} with S the partial sums of n+1 Exp(1) draws are the order
+        // statistics of n uniforms.
+        let mut spacings: Vec<f64> = (0..=n).map(|_| Exp1.sample(rng)).collect();
+        let total: f64 = spacings.iter().sum();
+        let mut acc = 0.0;
+        for s in spacings.iter_mut() {
+            acc += *s;
+            *s = acc / total;
+        }
+        self.indices.clear();
+        let mut cum = self.weights[0];
+        let mut j = 0;
+        for u in spacings.iter().take(n) {
+            while *u > cum && j + 1 < n {
+                j += 1;
+                cum += self.weights[j];
+            }
+            self.indices.push(j);
+        }
+        self.histories
+            .gather_into(&self.indices, &mut self.resampled);
+        std::mem::swap(&mut self.histories, &mut self.resampled);
+        self.weights.fill(1.0 / n as f64);
+    }
+
+    /// Gaussian jitter with sigma = c x per-axis spread x N^(-1/3); the whole track moves so
+    /// the particle keeps the velocity its history encodes.
+    fn roughen<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+        let n = self.weights.len();
+        if self.params.roughening == 0.0 || n < 2 {
+            return;
+        }
+        let (mut lo, mut hi) = (Enu2::repeat(f64::INFINITY), Enu2::repeat(f64::NEG_INFINITY));
+        for i in 0..n {
+            let p = self.histories.newest(i);
+            lo = lo.inf(&p);
+            hi = hi.sup(&p);
+        }
+        let k = self.params.roughening * (n as f64).powf(-1.0 / 3.0);
+        let sigma = (hi - lo) * k;
+        for i in 0..n {
+            let jitter = Enu2::new(
+                sigma.x * rng.sample::<f64, _>(StandardNormal),
+                sigma.y * rng.sample::<f64, _>(StandardNormal),
+            );
+            self.histories.translate(i, &jitter);
+        }
+    }
+
+    /// Every particle, every history slot: a recent measurement + N(0, R), equal weights.
+    ///
+    /// Slot t of the history takes the newest measurement at or before that step within
+    /// the window (the oldest one for earlier slots), so the seeded tracks follow what was
+    /// actually seen.
+    fn reseed_around_measurements<R: Rng + ?Sized>(&mut self, world: &World, rng: &mut R) {
+        let k = self.params.history_len;
+        let n = self.weights.len();
+        let now = self.step_index;
+        let window_start = now.saturating_sub(k as u64 - 1);
+        let in_window: Vec<(u64, Enu2)> = self
+            .recent
+            .iter()
+            .filter(|(s, _)| *s >= window_start)
+            .cloned()
+            .collect();
+        let Some(&(_, oldest)) = in_window.first() else {
+            self.redraw_uniform(rng);
+            return;
+        };
+        let slot_centre: Vec<Enu2> = (0..k)
+            .map(|t| {
+                let step = now + t as u64 + 1 - k as u64;
+                in_window
+                    .iter()
+                    .rev()
+                    .find(|(s, _)| *s <= step)
+                    .map(|(_, z)| *z)
+                    .unwrap_or(oldest)
+            })
+            .collect();
+        for i in 0..n {
+            let tr = self.histories.track_mut(i);
+            for (t, c) in slot_centre.iter().enumerate() {
+                let p = world.measurement.measure(c, rng);
+                tr[2 * t] = p.x;
+                tr[2 * t + 1] = p.y;
+            }
+        }
+        self.weights.fill(1.0 / n as f64);
+    }
+
+    /// Uniform positions over the workspace, each with a straight track at a speed drawn
+    /// from [0, init_speed_max] and a uniform heading; equal weights.
+    fn redraw_uniform<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+        let ws = self.workspace_enu;
+        let k = self.params.history_len;
+        let n = self.weights.len();
+        for i in 0..n {
+            let p = Enu2::new(
+                rng.gen_range(ws.x_min_m..=ws.x_max_m),
+                rng.gen_range(ws.y_min_m..=ws.y_max_m),
+            );
+            let speed = rng.gen_range(0.0..=self.params.init_speed_max_mps);
+            let heading = rng.gen_range(0.0..std::f64::consts::TAU);
+            let v_step = Enu2::new(heading.cos(), heading.sin()) * speed * self.params.dt_s;
+            let tr = self.histories.track_mut(i);
+            for t in 0..k {
+                let q = p - v_step * (k - 1 - t) as f64;
+                tr[2 * t] = q.x;
+                tr[2 * t + 1] = q.y;
+            }
+        }
+        self.weights.fill(1.0 / n as f64);
+    }
+
+    /// Overwrites weights (tests and replay); they are normalised, and a degenerate set is
+    /// refused.
+    pub fn set_weights(&mut self, weights: &[f64]) -> bool {
+        if weights.len() != self.weights.len() {
+            return false;
+        }
+        let old = self.weights.clone();
+        self.weights.copy_from_slice(weights);
+        if self.normalize() {
+            true
+        } else {
+            self.weights = old;
+            false
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,257 @@
+use proptest::prelude::*;
+use rand::SeedableRng;
+
+use super::*;
+use crate::motion::ConstantVelocity;
+use crate::rng::CoreRng;
+
+fn setup(n: usize) -> (Config, World, ParticleFilter, CoreRng) {
+    let mut c = Config::default_lab();
+    c.filter.particles = n;
+    let world = World::from_config(&c);
+    let mut rng = CoreRng::seed_from_u64(42);
+    let pf = ParticleFilter::new(FilterParams::from_config(&c), c.workspace_enu, &mut rng);
+    (c, world, pf, rng)
+}
+
+fn mass_inside(pf: &ParticleFilter, world: &World, agent: &Enu2) -> f64 {
+    (0..pf.weights().len())
+        .filter(|&i| world.is_visible(agent, &pf.particle(i)))
+        .map(|i| pf.weights()[i])
+        .sum()
+}
+
+/// A model that returns NaN for every other particle.
+struct Broken;
+impl MotionModel for Broken {
+    fn name(&self) -> &str {
+        "broken"
+    }
+    fn required_history_len(&self) -> Option<usize> {
+        None
+    }
+    fn predict(&mut self, h: &Histories, out: &mut [Enu2]) -> Result<(), MotionError> {
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = if i % 2 == 0 {
+                Enu2::new(f64::NAN, 0.0)
+            } else {
+                h.newest(i)
+            };
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn initial_particles_cover_the_workspace_with_equal_weights() {
+    let (c, _, pf, _) = setup(2000);
+    assert!((pf.weights().iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    let mean = pf.mean();
+    let centre = c.workspace_enu.center();
+    assert!((mean - centre).norm() < 0.1, "{mean} vs {centre}");
+    // Uniform over 4 m x 3.2 m: variance w^2/12 and h^2/12.
+    let cov = pf.covariance();
+    assert!((cov[(0, 0)] - 16.0 / 12.0).abs() < 0.1, "{cov}");
+    assert!((cov[(1, 1)] - 3.2 * 3.2 / 12.0).abs() < 0.1, "{cov}");
+}
+
+#[test]
+fn negative_information_lowers_the_mass_inside_the_footprint() {
+    let (c, world, mut pf, mut rng) = setup(2000);
+    let agent = Enu2::new(-2.0, 1.5); // away from occlusions
+    let before = mass_inside(&pf, &world, &agent);
+    assert!(before > 0.01, "some particles start in view: {before}");
+    let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
+    pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+    let after = mass_inside(&pf, &world, &agent);
+    assert!(after < 0.2 * before, "before {before}, after {after}");
+}
+
+#[test]
+fn negative_information_does_not_apply_inside_occlusions() {
+    let (c, world, mut pf, mut rng) = setup(2000);
+    // Footprint centred on occlusion 1: particles there are hidden, so not penalised.
+    let agent = Enu2::new(-1.25, -0.6);
+    let hidden_mass = |pf: &ParticleFilter| -> f64 {
+        (0..pf.weights().len())
+            .filter(|&i| world.is_occluded(&pf.particle(i)))
+            .map(|i| pf.weights()[i])
+            .sum()
+    };
+    let before = hidden_mass(&pf);
+    let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
+    pf.set_weights(&vec![1.0; 2000]);
+    let _ = pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+    let after = hidden_mass(&pf);
+    // The footprint (0.84 m) lies inside the 1 m occlusion, so nothing is visible and the
+    // hidden mass cannot drop by the miss probability.
+    assert!(after > 0.5 * before, "{before} -> {after}");
+}
+
+#[test]
+fn measurement_pulls_the_estimate_to_the_target() {
+    let (c, world, mut pf, mut rng) = setup(500);
+    let target = Enu2::new(0.35, -0.6);
+    let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
+    for _ in 0..6 {
+        let z = world.measurement.measure(&target, &mut rng);
+        pf.step(&mut model, Some(z), &target, &world, &mut rng)
+            .unwrap();
+    }
+    // With a = 0.99 and b = 0.4 the filter often re-seeds around the newest measurement,
+    // so the estimate is within a few measurement sigmas (0.1 m) of the truth, and tight.
+    assert!((pf.mean() - target).norm() < 0.35, "{}", pf.mean());
+    assert!(pf.covariance().determinant() < 1e-3);
+}
+
+#[test]
+fn resampling_keeps_the_distribution() {
+    let (_, _, mut pf, mut rng) = setup(20_000);
+    // Weight particles by a bump: the weighted mean and covariance before resampling must
+    // match the equally weighted ones after, within Monte Carlo error.
+    let w: Vec<f64> = (0..20_000)
+        .map(|i| {
+            let p = pf.particle(i);
+            (-(p - Enu2::new(-1.0, 0.5)).norm_squared() / 0.5).exp()
+        })
+        .collect();
+    assert!(pf.set_weights(&w));
+    let (m0, c0) = (pf.mean(), pf.covariance());
+    pf.resample_multinomial(&mut rng);
+    assert!(pf
+        .weights()
+        .iter()
+        .all(|w| (*w - 1.0 / 20_000.0).abs() < 1e-15));
+    let (m1, c1) = (pf.mean(), pf.covariance());
+    // sd of the mean ~ sqrt(0.25 / 20000) = 0.0035 per axis; 5 sigma.
+    assert!((m1 - m0).norm() < 0.02, "{m0} vs {m1}");
+    assert!((c1 - c0).abs().max() < 0.02, "{c0} vs {c1}");
+}
+
+#[test]
+fn resampling_copies_whole_histories() {
+    let (_, _, mut pf, mut rng) = setup(50);
+    let mut w = vec![0.0; 50];
+    w[7] = 1.0;
+    assert!(pf.set_weights(&w));
+    let track = pf.histories().track(7).to_vec();
+    pf.resample_multinomial(&mut rng);
+    for i in 0..50 {
+        assert_eq!(pf.histories().track(i), &track[..]);
+    }
+}
+
+#[test]
+fn nonfinite_model_outputs_are_never_taken_in() {
+    let (_, world, mut pf, mut rng) = setup(100);
+    let r = pf
+        .step(&mut Broken, None, &Enu2::new(-2.0, 1.5), &world, &mut rng)
+        .unwrap();
+    assert_eq!(r.nonfinite_predictions, 50);
+    assert!(pf
+        .particles()
+        .iter()
+        .all(|p| p.x.is_finite() && p.y.is_finite()));
+    assert_eq!(pf.counters().nonfinite_predictions, 50);
+}
+
+#[test]
+fn all_particles_in_view_without_a_detection_stays_normalised() {
+    let (c, world, mut pf, mut rng) = setup(200);
+    // Put every particle under the camera, then report no detection repeatedly: every
+    // weight is multiplied by the miss probability and must still normalise.
+    let agent = Enu2::new(-2.0, 1.5);
+    let target = agent;
+    let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
+    for _ in 0..5 {
+        let z = world.measurement.measure(&target, &mut rng);
+        pf.step(&mut model, Some(z), &agent, &world, &mut rng)
+            .unwrap();
+    }
+    for _ in 0..20 {
+        pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+        let s: f64 = pf.weights().iter().sum();
+        assert!((s - 1.0).abs() < 1e-9 && pf.weights().iter().all(|w| w.is_finite()));
+    }
+}
+
+#[test]
+fn a_far_measurement_reseeds_instead_of_underflowing() {
+    let (c, world, mut pf, mut rng) = setup(300);
+    let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
+    let here = Enu2::new(-2.5, 1.8);
+    for _ in 0..5 {
+        let z = world.measurement.measure(&here, &mut rng);
+        pf.step(&mut model, Some(z), &here, &world, &mut rng)
+            .unwrap();
+    }
+    // The target jumps 4 m: every likelihood underflows in the linear domain.
+    let there = Enu2::new(0.8, -1.0);
+    let r = pf
+        .step(&mut model, Some(there), &there, &world, &mut rng)
+        .unwrap();
+    assert!(matches!(
+        r.action,
+        ResampleAction::Reseeded | ResampleAction::Recovered
+    ));
+    assert!(pf.weights().iter().all(|w| w.is_finite()));
+}
+
+#[test]
+fn history_length_mismatch_is_a_clear_error() {
+    struct NeedsTen;
+    impl MotionModel for NeedsTen {
+        fn name(&self) -> &str {
+            "needs-ten"
+        }
+        fn required_history_len(&self) -> Option<usize> {
+            Some(12)
+        }
+        fn predict(&mut self, _: &Histories, _: &mut [Enu2]) -> Result<(), MotionError> {
+            Ok(())
+        }
+    }
+    let (_, world, mut pf, mut rng) = setup(10);
+    let err = pf
+        .step(&mut NeedsTen, None, &Enu2::zeros(), &world, &mut rng)
+        .unwrap_err();
+    assert!(err.to_string().contains("12"), "{err}");
+}
+
+#[test]
+fn same_seed_same_filter() {
+    let run = || {
+        let (c, world, mut pf, mut rng) = setup(300);
+        let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
+        for k in 0..30 {
+            let t = Enu2::new(-1.0 + 0.03 * k as f64, 0.5);
+            let z = (k % 3 == 0).then(|| world.measurement.measure(&t, &mut rng));
+            pf.step(&mut model, z, &t, &world, &mut rng).unwrap();
+        }
+        (pf.mean(), pf.covariance())
+    };
+    assert_eq!(run(), run());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    /// Weights sum to one and stay finite under any sequence of updates.
+    #[test]
+    fn weights_stay_normalised_and_finite(
+        seed in 0u64..1000,
+        events in prop::collection::vec((any::<bool>(), -4.0f64..2.0, -2.0f64..3.0), 1..25),
+    ) {
+        let (c, world, mut pf, _) = setup(64);
+        let mut rng = CoreRng::seed_from_u64(seed);
+        let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
+        for (measured, x, y) in events {
+            let p = Enu2::new(x, y);
+            let z = measured.then_some(p);
+            pf.step(&mut model, z, &p, &world, &mut rng).unwrap();
+            let s: f64 = pf.weights().iter().sum();
+            prop_assert!((s - 1.0).abs() < 1e-9, "sum {}", s);
+            prop_assert!(pf.weights().iter().all(|w| w.is_finite() && *w >= 0.0));
+            prop_assert!(pf.particles().iter().all(|p| p.x.is_finite() && p.y.is_finite()));
+        }
+    }
+}

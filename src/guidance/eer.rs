@@ -1,0 +1,494 @@
+//! Expected entropy reduction (the paper's eqs. 10, 11 and 13) and the waypoint that
+//! maximises it (eq. 14).
+//!
+//! One planning cycle:
+//! 1. N_H particles are taken from the filter (all of them, with their weights, when
+//!    N_H = N; otherwise drawn uniformly with replacement, keeping their weights).
+//! 2. Each is propagated K filter steps through the motion model with process noise:
+//!    x^_j. Each yields N_M simulated measurements z_jm = x^_j + N(0, R).
+//! 3. For a candidate waypoint c, a simulated measurement is received only if its particle
+//!    lies inside the footprint of an agent at c and outside every occlusion (the paper's
+//!    intent; the authors' code tested z_j against a footprint built around z_j, which
+//!    always passes). A received z_jm gives the eq. 10 entropy; otherwise the posterior is
+//!    the missed-detection one, whose likelihood is p_miss for particles in view from c
+//!    and 1 elsewhere (negative information; with p_miss = 1 this is exactly eq. 11).
+//! 4. EER(c) = H_now - sum_jm alpha_jm H_jm(c), with alpha_jm proportional to
+//!    w_j p(z_jm | x^_j): eq. 13's weighting, normalised so the weights form an
+//!    expectation.
+//!
+//! Interpretation, documented: the transition density p(x^_i | x_j) inside the entropy
+//! formulas is a Gaussian with covariance `guidance.entropy_kernel_cov_m2` (Q, as in the
+//! authors' code) centred on the propagated particle x^_j, i.e. the K-step transition of
+//! particle j approximated at its own propagated position. H_now uses the same kernel on
+//! the current particles.
+//!
+//! The fast evaluation rests on one observation: the measured-branch entropies do not
+//! depend on the candidate (the candidate only decides whether each is received), and the
+//! missed-detection entropy depends on the candidate only through sums over the particles
+//! in view. So the O(N_H^2) kernel sums are computed once per cycle and each candidate
+//! costs O(N_H). [`evaluate_reference`] computes every posterior from scratch for tests.
+
+use rand::Rng;
+
+use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
+use crate::config::Config;
+use crate::estimation::ParticleFilter;
+use crate::motion::{Histories, MotionError, MotionModel};
+use crate::world::geometry::Enu2;
+use crate::world::measurement::Gaussian2;
+use crate::world::World;
+
+/// EER parameters, from the configuration.
+#[derive(Debug, Clone)]
+pub struct EerParams {
+    /// N_H.
+    pub entropy_particles: usize,
+    /// N_M.
+    pub measurements_per_particle: usize,
+    /// K.
+    pub horizon_steps: usize,
+    /// Reachable-candidate grid side.
+    pub grid_side: usize,
+    /// Half width of the square the agent can reach in K filter steps, metres.
+    pub reach_m: f64,
+    /// Transition kernel of the entropy formulas.
+    pub kernel: Gaussian2,
+    /// p(no detection | in view).
+    pub miss_probability: f64,
+    /// Process noise added at each rollout step: N(0, 2Q).
+    pub process_noise: Gaussian2,
+}
+
+impl EerParams {
+    /// From a validated configuration.
+    pub fn from_config(c: &Config) -> Self {
+        let g = &c.guidance;
+        let q = c.filter.process_noise_cov_m2;
+        Self {
+            entropy_particles: g.entropy_particles,
+            measurements_per_particle: g.measurements_per_particle,
+            horizon_steps: g.horizon_steps,
+            grid_side: g.candidate_grid_side,
+            reach_m: c.agent.speed_limit_mps * g.horizon_steps as f64 * c.filter_dt_s(),
+            kernel: Gaussian2::new(g.entropy_kernel_cov_m2),
+            miss_probability: c.filter.miss_probability,
+            process_noise: Gaussian2::new([
+                [2.0 * q[0][0], 2.0 * q[0][1]],
+                [2.0 * q[1][0], 2.0 * q[1][1]],
+            ]),
+        }
+    }
+}
+
+/// Everything the evaluation needs, after the rollout: pure data.
+#[derive(Debug, Clone, Default)]
+pub struct EerInputs {
+    /// Current positions of the N_H particles (for H_now).
+    pub current: Vec<Enu2>,
+    /// Their normalised weights.
+    pub weights: Vec<f64>,
+    /// Their positions after K predicted steps, x^_j.
+    pub predicted: Vec<Enu2>,
+    /// Simulated measurements, `N_M` per particle: `measurements[j * n_m + m]`.
+    pub measurements: Vec<Enu2>,
+    /// Expectation weights alpha_jm (sum to 1), same layout.
+    pub alpha: Vec<f64>,
+    /// N_M.
+    pub n_m: usize,
+}
+
+/// The result of one planning cycle.
+#[derive(Debug, Clone)]
+pub struct EerDecision {
+    /// The chosen waypoint, world ENU, inside the geofence.
+    pub waypoint_enu: Enu2,
+    /// Its EER.
+    pub eer: f64,
+    /// Entropy of the current estimate.
+    pub h_now: f64,
+    /// Number of candidates evaluated.
+    pub candidates: usize,
+}
+
+/// Candidate waypoints: the predicted particles plus a grid of the points reachable within
+/// K steps around the agent, all clamped to the geofence.
+pub fn candidates(
+    inputs: &EerInputs,
+    agent_enu: &Enu2,
+    reach_m: f64,
+    grid_side: usize,
+    world: &World,
+) -> Vec<Enu2> {
+    let mut out = Vec::with_capacity(inputs.predicted.len() + grid_side * grid_side);
+    out.extend(
+        inputs
+            .predicted
+            .iter()
+            .map(|p| world.workspace_enu.clamp(p)),
+    );
+    let step = if grid_side > 1 {
+        2.0 * reach_m / (grid_side - 1) as f64
+    } else {
+        0.0
+    };
+    let origin = if grid_side > 1 {
+        agent_enu - Enu2::repeat(reach_m)
+    } else {
+        *agent_enu
+    };
+    for iy in 0..grid_side {
+        for ix in 0..grid_side {
+            let p = origin + Enu2::new(ix as f64 * step, iy as f64 * step);
+            out.push(world.workspace_enu.clamp(&p));
+        }
+    }
+    out
+}
+
+/// Entropy of the current estimate (eq. 7 form over the N_H current particles).
+fn h_now(inputs: &EerInputs, kernel: &Gaussian2) -> f64 {
+    let log_s = log_transition_sums(&inputs.current, &inputs.current, &inputs.weights, kernel);
+    entropy_prior(&inputs.weights, &log_s)
+}
+
+/// Reusable workspace of the fast evaluation.
+#[derive(Debug, Default, Clone)]
+pub struct EerScratch {
+    log_s: Vec<f64>,
+    h_meas: Vec<f64>,
+    alpha_h: Vec<f64>,
+    alpha_particle: Vec<f64>,
+    occluded: Vec<bool>,
+    log_w: Vec<f64>,
+    buf: Vec<f64>,
+}
+
+/// Eq. 10 entropy after measurement `z`, as [`super::entropy::entropy_measured`] computes it, with
+/// log-weights precomputed and one exponential per particle.
+fn entropy_measured_fast(
+    z: &Enu2,
+    points: &[Enu2],
+    log_w: &[f64],
+    log_s: &[f64],
+    noise: &Gaussian2,
+    buf: &mut [f64],
+) -> f64 {
+    let mut max = f64::NEG_INFINITY;
+    for ((b, p), lw) in buf.iter_mut().zip(points).zip(log_w) {
+        *b = noise.log_pdf(&(z - p)) + lw;
+        max = max.max(*b);
+    }
+    let (mut sum, mut acc) = (0.0, 0.0);
+    for ((b, lw), ls) in buf.iter().zip(log_w).zip(log_s) {
+        let e = (b - max).exp();
+        if e > 0.0 {
+            sum += e;
+            // log l_i + log S_i, with log l_i = b - log w_i.
+            acc += e * (b - lw + ls);
+        }
+    }
+    max + sum.ln() - acc / sum
+}
+
+/// EER of every candidate, fast: O(N_H^2 N_M) once, then O(N_H) per candidate.
+/// Returns `(h_now, eer per candidate)`.
+pub fn evaluate_fast(
+    inputs: &EerInputs,
+    candidates: &[Enu2],
+    world: &World,
+    kernel: &Gaussian2,
+    miss_probability: f64,
+    scratch: &mut EerScratch,
+) -> (f64, Vec<f64>) {
+    let n = inputs.predicted.len();
+    let n_m = inputs.n_m;
+    let h0 = h_now(inputs, kernel);
+    let w = &inputs.weights;
+    scratch.log_s = log_transition_sums(&inputs.predicted, &inputs.predicted, w, kernel);
+    let log_s = &scratch.log_s;
+
+    // Measured-branch entropies: independent of the candidate. One exp per (z, particle)
+    // pair: the exponentials of the log-sum-exp are the unnormalised posterior weights.
+    scratch.log_w.clear();
+    scratch.log_w.extend(w.iter().map(|w| w.ln()));
+    scratch.h_meas.clear();
+    scratch.alpha_h.clear();
+    scratch.alpha_particle.clear();
+    scratch.buf.resize(n, 0.0);
+    for j in 0..n {
+        let mut ap = 0.0;
+        let mut ah = 0.0;
+        for m in 0..n_m {
+            let idx = j * n_m + m;
+            let h = entropy_measured_fast(
+                &inputs.measurements[idx],
+                &inputs.predicted,
+                &scratch.log_w,
+                log_s,
+                &world.measurement.noise,
+                &mut scratch.buf,
+            );
+            scratch.h_meas.push(h);
+            ap += inputs.alpha[idx];
+            ah += inputs.alpha[idx] * h;
+        }
+        scratch.alpha_particle.push(ap);
+        scratch.alpha_h.push(ah);
+    }
+    scratch.occluded.clear();
+    scratch
+        .occluded
+        .extend(inputs.predicted.iter().map(|p| world.is_occluded(p)));
+
+    // Sums over all particles, to get the not-in-view sums by subtraction.
+    let w_log_s_all: f64 = w.iter().zip(log_s).map(|(w, s)| w * s).sum();
+    let log_miss = miss_probability.ln();
+    let fp = world.footprint;
+    let eer = candidates
+        .iter()
+        .map(|c| {
+            let (mut w_vis, mut wls_vis, mut p_vis, mut a_h_vis) = (0.0, 0.0, 0.0, 0.0);
+            for i in 0..n {
+                let p = &inputs.predicted[i];
+                if !scratch.occluded[i] && fp.contains(c, p) {
+                    w_vis += w[i];
+                    wls_vis += w[i] * log_s[i];
+                    p_vis += scratch.alpha_particle[i];
+                    a_h_vis += scratch.alpha_h[i];
+                }
+            }
+            // Missed detection from c: l_i = p_miss in view, 1 elsewhere.
+            let w_out = (1.0 - w_vis).max(0.0);
+            let z = w_out + miss_probability * w_vis;
+            let h_miss = z.ln()
+                - ((w_log_s_all - wls_vis) + miss_probability * (w_vis * log_miss + wls_vis)) / z;
+            let expected = a_h_vis + (1.0 - p_vis).max(0.0) * h_miss;
+            h0 - expected
+        })
+        .collect();
+    (h0, eer)
+}
+
+/// EER of every candidate computed from scratch, the obviously-correct way: for each
+/// candidate and each simulated measurement, build that posterior's likelihood vector and
+/// evaluate the entropy formula with its double sum. O(C N_H N_M N_H^2): tests only.
+pub fn evaluate_reference(
+    inputs: &EerInputs,
+    candidates: &[Enu2],
+    world: &World,
+    kernel: &Gaussian2,
+    miss_probability: f64,
+) -> (f64, Vec<f64>) {
+    let n = inputs.predicted.len();
+    let w = &inputs.weights;
+    let trans = |x: &Enu2, c: &Enu2| kernel.pdf(&(x - c));
+    let h0 = -(0..n)
+        .map(|i| {
+            let s: f64 = (0..n)
+                .map(|j| trans(&inputs.current[i], &inputs.current[j]) * w[j])
+                .sum();
+            w[i] * s.ln()
+        })
+        .sum::<f64>();
+    let visible = |c: &Enu2, p: &Enu2| world.is_visible(c, p);
+    let eer = candidates
+        .iter()
+        .map(|c| {
+            let mut expected = 0.0;
+            for j in 0..n {
+                for m in 0..inputs.n_m {
+                    let idx = j * inputs.n_m + m;
+                    let lik: Vec<f64> = if visible(c, &inputs.predicted[j]) {
+                        let z = inputs.measurements[idx];
+                        (0..n)
+                            .map(|i| world.measurement.noise.pdf(&(z - inputs.predicted[i])))
+                            .collect()
+                    } else {
+                        (0..n)
+                            .map(|i| {
+                                if visible(c, &inputs.predicted[i]) {
+                                    miss_probability
+                                } else {
+                                    1.0
+                                }
+                            })
+                            .collect()
+                    };
+                    let norm: f64 = (0..n).map(|i| lik[i] * w[i]).sum();
+                    let mut h = norm.ln();
+                    for i in 0..n {
+                        let s: f64 = (0..n)
+                            .map(|l| trans(&inputs.predicted[i], &inputs.predicted[l]) * w[l])
+                            .sum();
+                        let post = lik[i] * w[i] / norm;
+                        if post > 0.0 {
+                            h -= post * (lik[i] * s).ln();
+                        }
+                    }
+                    expected += inputs.alpha[idx] * h;
+                }
+            }
+            h0 - expected
+        })
+        .collect();
+    (h0, eer)
+}
+
+/// The EER guidance law: owns its scratch buffers across cycles.
+#[derive(Debug, Clone)]
+pub struct EerPlanner {
+    params: EerParams,
+    indices: Vec<usize>,
+    rollout: Histories,
+    next: Vec<Enu2>,
+    inputs: EerInputs,
+    scratch: EerScratch,
+}
+
+impl EerPlanner {
+    /// A planner with these parameters.
+    pub fn new(params: EerParams) -> Self {
+        Self {
+            params,
+            indices: Vec::new(),
+            rollout: Histories::new(0, 1),
+            next: Vec::new(),
+            inputs: EerInputs::default(),
+            scratch: EerScratch::default(),
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &EerParams {
+        &self.params
+    }
+
+    /// Steps 1 and 2 of the cycle: subset, K-step rollout through `model`, simulated
+    /// measurements. The motion-model calls all happen here.
+    pub fn prepare<R: Rng + ?Sized>(
+        &mut self,
+        pf: &ParticleFilter,
+        model: &mut dyn MotionModel,
+        world: &World,
+        rng: &mut R,
+    ) -> Result<&EerInputs, MotionError> {
+        let n = pf.weights().len();
+        let n_h = self.params.entropy_particles;
+        self.indices.clear();
+        if n_h >= n {
+            self.indices.extend(0..n);
+        } else {
+            self.indices.extend((0..n_h).map(|_| rng.gen_range(0..n)));
+        }
+        let inp = &mut self.inputs;
+        inp.current.clear();
+        inp.weights.clear();
+        for &i in &self.indices {
+            inp.current.push(pf.particle(i));
+            inp.weights.push(pf.weights()[i]);
+        }
+        let total: f64 = inp.weights.iter().sum();
+        inp.weights.iter_mut().for_each(|w| *w /= total);
+
+        pf.histories().gather_into(&self.indices, &mut self.rollout);
+        self.next.resize(self.indices.len(), Enu2::zeros());
+        for _ in 0..self.params.horizon_steps {
+            model.predict(&self.rollout, &mut self.next)?;
+            for (i, p) in self.next.iter_mut().enumerate() {
+                if !(p.x.is_finite() && p.y.is_finite()) {
+                    *p = self.rollout.newest(i);
+                }
+                *p += self.params.process_noise.sample(rng);
+            }
+            self.rollout.push(&self.next);
+        }
+        inp.predicted.clear();
+        inp.predicted
+            .extend((0..self.indices.len()).map(|i| self.rollout.newest(i)));
+
+        let n_m = self.params.measurements_per_particle;
+        inp.n_m = n_m;
+        inp.measurements.clear();
+        let mut log_alpha = Vec::with_capacity(inp.predicted.len() * n_m);
+        for (x, w) in inp.predicted.iter().zip(&inp.weights) {
+            for _ in 0..n_m {
+                let z = world.measurement.measure(x, rng);
+                log_alpha.push(w.ln() + world.measurement.log_likelihood(&z, x));
+                inp.measurements.push(z);
+            }
+        }
+        let lse = log_sum_exp(log_alpha.iter().cloned());
+        inp.alpha.clear();
+        inp.alpha.extend(log_alpha.iter().map(|a| (a - lse).exp()));
+        Ok(&self.inputs)
+    }
+
+    /// Steps 3 and 4: candidates, EER of each, argmax. No motion-model calls.
+    pub fn decide(&mut self, agent_enu: &Enu2, world: &World) -> EerDecision {
+        let cands = candidates(
+            &self.inputs,
+            agent_enu,
+            self.params.reach_m,
+            self.params.grid_side,
+            world,
+        );
+        let (h0, eer) = evaluate_fast(
+            &self.inputs,
+            &cands,
+            world,
+            &self.params.kernel,
+            self.params.miss_probability,
+            &mut self.scratch,
+        );
+        let (mut best, mut best_v) = (0, f64::NEG_INFINITY);
+        for (i, v) in eer.iter().enumerate() {
+            if *v > best_v {
+                best = i;
+                best_v = *v;
+            }
+        }
+        let (lo, hi) = eer
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                (l.min(*v), h.max(*v))
+            });
+        let waypoint = if !best_v.is_finite() || hi - lo < 1e-12 {
+            // Nothing to choose between (no candidate sees any particle): head for the
+            // predicted mean, where the target most likely is.
+            let mut m = Enu2::zeros();
+            for (p, w) in self.inputs.predicted.iter().zip(&self.inputs.weights) {
+                m += *w * p;
+            }
+            world.workspace_enu.clamp(&m)
+        } else {
+            cands[best]
+        };
+        EerDecision {
+            waypoint_enu: waypoint,
+            eer: best_v,
+            h_now: h0,
+            candidates: cands.len(),
+        }
+    }
+
+    /// A whole cycle.
+    pub fn plan<R: Rng + ?Sized>(
+        &mut self,
+        pf: &ParticleFilter,
+        model: &mut dyn MotionModel,
+        agent_enu: &Enu2,
+        world: &World,
+        rng: &mut R,
+    ) -> Result<EerDecision, MotionError> {
+        self.prepare(pf, model, world, rng)?;
+        Ok(self.decide(agent_enu, world))
+    }
+
+    /// The inputs of the last prepared cycle.
+    pub fn inputs(&self) -> &EerInputs {
+        &self.inputs
+    }
+}
+
+#[cfg(test)]
+mod tests;

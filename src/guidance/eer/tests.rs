@@ -1,0 +1,212 @@
+use rand::{Rng, SeedableRng};
+
+use super::*;
+use crate::estimation::FilterParams;
+use crate::motion::ConstantVelocity;
+use crate::rng::CoreRng;
+
+fn random_inputs(rng: &mut CoreRng, n: usize, n_m: usize, world: &World) -> EerInputs {
+    let mut inp = EerInputs {
+        n_m,
+        ..Default::default()
+    };
+    for _ in 0..n {
+        // Around both occlusions and the open floor, so every branch is exercised.
+        let c = Enu2::new(rng.gen_range(-2.0..1.0), rng.gen_range(-1.0..1.5));
+        inp.current.push(c);
+        inp.predicted
+            .push(c + Enu2::new(rng.gen_range(-0.3..0.3), rng.gen_range(-0.3..0.3)));
+        inp.weights.push(rng.gen_range(0.1..1.0));
+    }
+    let s: f64 = inp.weights.iter().sum();
+    inp.weights.iter_mut().for_each(|w| *w /= s);
+    for j in 0..n {
+        for _ in 0..n_m {
+            let z = world.measurement.measure(&inp.predicted[j], rng);
+            inp.measurements.push(z);
+            inp.alpha.push(inp.weights[j] * rng.gen_range(0.5..1.5));
+        }
+    }
+    let s: f64 = inp.alpha.iter().sum();
+    inp.alpha.iter_mut().for_each(|a| *a /= s);
+    inp
+}
+
+#[test]
+fn fast_eer_equals_reference_on_random_inputs() {
+    let mut c = Config::default_lab();
+    // A wide kernel and a moderate miss probability keep every term well away from
+    // underflow in the reference's linear-domain arithmetic.
+    c.guidance.entropy_kernel_cov_m2 = [[0.05, 0.01], [0.01, 0.04]];
+    let world = World::from_config(&c);
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let mut rng = CoreRng::seed_from_u64(9);
+    for (trial, &(n, n_m, p_miss)) in [(12, 1, 1e-3), (9, 3, 0.2), (15, 2, 1.0), (6, 1, 1e-10)]
+        .iter()
+        .enumerate()
+    {
+        let inp = random_inputs(&mut rng, n, n_m, &world);
+        let agent = Enu2::new(-0.5, 0.4);
+        let cands = candidates(&inp, &agent, 1.2, 5, &world);
+        let mut scratch = EerScratch::default();
+        let (h_fast, fast) = evaluate_fast(&inp, &cands, &world, &kernel, p_miss, &mut scratch);
+        let (h_ref, reference) = evaluate_reference(&inp, &cands, &world, &kernel, p_miss);
+        assert!(
+            (h_fast - h_ref).abs() < 1e-9,
+            "trial {trial}: {h_fast} vs {h_ref}"
+        );
+        let mut differing = 0;
+        for (a, b) in fast.iter().zip(&reference) {
+            assert!(
+                (a - b).abs() < 1e-9,
+                "trial {trial}: fast {a} vs reference {b}"
+            );
+            if (a - fast[0]).abs() > 1e-6 {
+                differing += 1;
+            }
+        }
+        assert!(differing > 0, "trial {trial}: candidates must not all tie");
+    }
+}
+
+#[test]
+fn eer_prefers_the_candidate_that_sees_the_particles() {
+    let c = Config::default_lab();
+    let world = World::from_config(&c);
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let mut rng = CoreRng::seed_from_u64(2);
+    // All mass in a 0.3 m cluster on open floor; one candidate over it, one far away.
+    let mut inp = EerInputs {
+        n_m: 1,
+        ..Default::default()
+    };
+    for _ in 0..30 {
+        let p = Enu2::new(
+            -2.2 + rng.gen_range(-0.15..0.15),
+            1.3 + rng.gen_range(-0.15..0.15),
+        );
+        inp.current.push(p);
+        inp.predicted.push(p);
+        inp.weights.push(1.0 / 30.0);
+        inp.measurements
+            .push(world.measurement.measure(&p, &mut rng));
+        inp.alpha.push(1.0 / 30.0);
+    }
+    let cands = [Enu2::new(-2.2, 1.3), Enu2::new(0.5, -1.0)];
+    let (_, eer) = evaluate_fast(
+        &inp,
+        &cands,
+        &world,
+        &kernel,
+        1e-10,
+        &mut EerScratch::default(),
+    );
+    assert!(eer[0] > eer[1] + 0.1, "{eer:?}");
+}
+
+#[test]
+fn occluded_particles_give_no_information() {
+    let c = Config::default_lab();
+    let world = World::from_config(&c);
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let mut rng = CoreRng::seed_from_u64(3);
+    // Every particle inside occlusion 1: no candidate can measure or miss them.
+    let mut inp = EerInputs {
+        n_m: 1,
+        ..Default::default()
+    };
+    for _ in 0..20 {
+        let p = Enu2::new(
+            -1.25 + rng.gen_range(-0.3..0.3),
+            -0.6 + rng.gen_range(-0.3..0.3),
+        );
+        inp.current.push(p);
+        inp.predicted.push(p);
+        inp.weights.push(0.05);
+        inp.measurements
+            .push(world.measurement.measure(&p, &mut rng));
+        inp.alpha.push(0.05);
+    }
+    let cands = [Enu2::new(-1.25, -0.6), Enu2::new(0.5, 1.5)];
+    let (_, eer) = evaluate_fast(
+        &inp,
+        &cands,
+        &world,
+        &kernel,
+        1e-10,
+        &mut EerScratch::default(),
+    );
+    assert!((eer[0] - eer[1]).abs() < 1e-12, "{eer:?}");
+}
+
+#[test]
+fn planner_waypoints_stay_inside_the_geofence_and_count_candidates() {
+    let c = Config::default_lab();
+    let world = World::from_config(&c);
+    let mut rng = CoreRng::seed_from_u64(4);
+    let pf = ParticleFilter::new(FilterParams::from_config(&c), c.workspace_enu, &mut rng);
+    let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
+    let mut planner = EerPlanner::new(EerParams::from_config(&c));
+    for agent in [
+        Enu2::new(0.9, 1.9),
+        Enu2::new(-2.9, -1.1),
+        Enu2::new(-1.0, 0.5),
+    ] {
+        let d = planner
+            .plan(&pf, &mut model, &agent, &world, &mut rng)
+            .unwrap();
+        assert!(
+            c.workspace_enu.contains(&d.waypoint_enu),
+            "{}",
+            d.waypoint_enu
+        );
+        assert_eq!(d.candidates, 25 + 16 * 16);
+        assert!(d.eer.is_finite() && d.h_now.is_finite());
+    }
+}
+
+#[test]
+fn all_particles_used_when_n_h_equals_n() {
+    let mut c = Config::default_lab();
+    c.filter.particles = 40;
+    c.guidance.entropy_particles = 40;
+    let world = World::from_config(&c);
+    let mut rng = CoreRng::seed_from_u64(5);
+    let pf = ParticleFilter::new(FilterParams::from_config(&c), c.workspace_enu, &mut rng);
+    let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
+    let mut planner = EerPlanner::new(EerParams::from_config(&c));
+    let inp = planner.prepare(&pf, &mut model, &world, &mut rng).unwrap();
+    assert_eq!(inp.current, pf.particles());
+    assert!((inp.alpha.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn fast_measured_entropy_equals_the_plain_formula() {
+    use crate::guidance::entropy::entropy_measured;
+    let c = Config::default_lab();
+    let world = World::from_config(&c);
+    let kernel = Gaussian2::new([[0.02, 0.0], [0.0, 0.02]]);
+    let mut rng = CoreRng::seed_from_u64(11);
+    let inp = random_inputs(&mut rng, 40, 1, &world);
+    let log_s = log_transition_sums(&inp.predicted, &inp.predicted, &inp.weights, &kernel);
+    let log_w: Vec<f64> = inp.weights.iter().map(|w| w.ln()).collect();
+    let mut buf = vec![0.0; 40];
+    for z in &inp.measurements {
+        let a = entropy_measured(
+            z,
+            &inp.predicted,
+            &inp.weights,
+            &log_s,
+            &world.measurement.noise,
+        );
+        let b = entropy_measured_fast(
+            z,
+            &inp.predicted,
+            &log_w,
+            &log_s,
+            &world.measurement.noise,
+            &mut buf,
+        );
+        assert!((a - b).abs() < 1e-10, "{a} vs {b}");
+    }
+}

@@ -1,0 +1,75 @@
+//! Guidance: where the agent should go next.
+//!
+//! * `eer`: maximise the expected entropy reduction (the paper's method).
+//! * `pfwm`: go to the particle filter's weighted mean.
+//! * `lawn`: go to the last measurement when there is a recent one, else sweep a lawnmower path.
+//! * `kf`: go to the Kalman filter's mean.
+//! * `truth`: go to the true target position (for the estimation comparison).
+//!
+//! Every waypoint is clamped to the geofence before it leaves this module.
+
+pub mod eer;
+pub mod entropy;
+pub mod lawn;
+
+use std::fmt;
+use std::str::FromStr;
+
+pub use eer::{EerDecision, EerParams, EerPlanner};
+pub use lawn::LawnmowerPath;
+
+/// A guidance law.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GuidanceKind {
+    /// Expected entropy reduction.
+    Eer,
+    /// Particle filter weighted mean.
+    Pfwm,
+    /// Lawnmower and tracking.
+    Lawn,
+    /// Kalman filter mean.
+    Kf,
+    /// True target position.
+    Truth,
+}
+
+impl GuidanceKind {
+    /// All laws, in report order.
+    pub const ALL: [GuidanceKind; 5] = [Self::Eer, Self::Pfwm, Self::Lawn, Self::Kf, Self::Truth];
+
+    /// The name used on the command line and in reports.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Self::Eer => "eer",
+            Self::Pfwm => "pfwm",
+            Self::Lawn => "lawn",
+            Self::Kf => "kf",
+            Self::Truth => "truth",
+        }
+    }
+
+    /// Whether the law reads the particle set (and so cannot run with a Kalman estimator).
+    pub fn needs_particles(&self) -> bool {
+        matches!(self, Self::Eer | Self::Pfwm)
+    }
+}
+
+impl fmt::Display for GuidanceKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for GuidanceKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .iter()
+            .find(|g| g.as_str() == s.trim())
+            .copied()
+            .ok_or_else(|| {
+                format!("unknown guidance law `{s}` (expected one of eer, pfwm, lawn, kf, truth)")
+            })
+    }
+}

@@ -1,0 +1,202 @@
+//! The `infotrack` command line.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+
+use infotrack::config::Config;
+use infotrack::guidance::GuidanceKind;
+use infotrack::report;
+use infotrack::sim::{EstimatorKind, MonteCarlo};
+use infotrack::world::World;
+
+#[derive(Parser)]
+#[command(
+    name = "infotrack",
+    version,
+    about = "Find and follow a hidden moving ground target from a drone"
+)]
+struct Cli {
+    /// Log filter (tracing syntax), e.g. `warn`, `infotrack=debug`.
+    #[arg(long, global = true, default_value = "warn")]
+    log: String,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Monte Carlo benchmark of guidance laws and motion models on the simulator.
+    Sim(SimArgs),
+    /// Time the core (PF step, EER cycle) on one thread and print a table.
+    Bench(BenchArgs),
+}
+
+#[derive(clap::Args)]
+struct SimArgs {
+    /// Scenario file; without it, the embedded config/default.toml (the paper's lab scenario).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Runs per guidance x motion combination.
+    #[arg(long, default_value_t = 10)]
+    runs: u64,
+    /// Seed of every random choice (default: the config's `seed`).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Seconds per run (default: the config's timing.duration_s, 90 s in the paper's scenario).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Guidance laws, comma-separated, of eer, pfwm, lawn, kf, truth.
+    #[arg(long, default_value = "eer,pfwm,lawn,kf", value_delimiter = ',')]
+    guidance: Vec<String>,
+    /// Motion models / estimators, comma-separated, of cv, kf.
+    #[arg(long, default_value = "cv", value_delimiter = ',')]
+    motion: Vec<String>,
+    /// Write the summary as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write per-step CSV logs of every run and PNG plots here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Worker threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Repetitions per median.
+    #[arg(long, default_value_t = 300)]
+    repetitions: usize,
+    /// Seed of the fixtures.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Also write the figures as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_new(&cli.log).unwrap_or_else(|_| {
+        eprintln!(
+            "warning: --log `{}` is not a valid filter; using `warn`",
+            cli.log
+        );
+        tracing_subscriber::EnvFilter::new("warn")
+    });
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
+    let result = match cli.command {
+        Command::Sim(a) => sim(a),
+        Command::Bench(a) => bench(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn load_config(path: Option<&Path>) -> Result<Config> {
+    Ok(match path {
+        Some(p) => Config::load(p)?,
+        None => Config::default_lab(),
+    })
+}
+
+fn sim(a: SimArgs) -> Result<()> {
+    let cfg = load_config(a.config.as_deref())?;
+    if a.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    let duration = a.duration.unwrap_or(cfg.timing.duration_s);
+    if !(duration.is_finite() && duration > 0.0) {
+        bail!("--duration must be a positive number of seconds, got {duration}");
+    }
+    let guidance = a
+        .guidance
+        .iter()
+        .map(|g| g.parse::<GuidanceKind>().map_err(anyhow::Error::msg))
+        .collect::<Result<Vec<_>>>()
+        .context("--guidance")?;
+    let estimators = a
+        .motion
+        .iter()
+        .map(|m| EstimatorKind::parse(m).map_err(anyhow::Error::msg))
+        .collect::<Result<Vec<_>>>()
+        .context("--motion")?;
+    if let Some(t) = a.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t.max(1))
+            .build_global()
+            .context("--threads")?;
+    }
+    let mc = MonteCarlo {
+        guidance,
+        estimators,
+        runs: a.runs,
+        seed: a.seed.unwrap_or(cfg.seed),
+        duration_s: duration,
+        keep_outputs: a.out.is_some(),
+        progress: !a.quiet,
+    };
+    let result = mc.run(&cfg)?;
+    print!("{}", report::table::render(&result));
+    if let Some(p) = &a.json {
+        report::write_json(p, &result)?;
+        println!("wrote {}", p.display());
+    }
+    if let Some(dir) = &a.out {
+        let world = World::from_config(&cfg);
+        for ((g, m), outs) in &result.outputs {
+            let sub = dir.join(format!("{g}_{m}"));
+            for (r, out) in outs.iter().enumerate() {
+                report::csv::write(&sub.join(format!("run{r:03}.csv")), &out.steps)?;
+            }
+            if let Some(first) = outs.first() {
+                report::plots::scene(
+                    &sub.join("scene_run000.png"),
+                    &format!("{} | {g} guidance, {m} motion, run 0", cfg.name),
+                    &world,
+                    &first.steps,
+                    &first.snapshots,
+                )?;
+                report::plots::estimation_error(
+                    &sub.join("estimation_error_run000.png"),
+                    &format!("{g} guidance, {m} motion, run 0: estimation error"),
+                    &first.steps,
+                )?;
+            }
+        }
+        report::plots::metrics_bars(&dir.join("metrics.png"), &result)?;
+        report::write_json(&dir.join("results.json"), &result)?;
+        println!(
+            "wrote per-step CSV logs, plots (metrics.png, */scene_run000.png, */estimation_error_run000.png) and results.json to {}",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+fn bench(a: BenchArgs) -> Result<()> {
+    if a.repetitions == 0 {
+        bail!("--repetitions must be at least 1");
+    }
+    let r = infotrack::bench::run(a.repetitions, a.seed);
+    print!("{}", infotrack::bench::render(&r));
+    if let Some(p) = &a.json {
+        report::write_json(p, &r)?;
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}

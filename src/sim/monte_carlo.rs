@@ -1,0 +1,240 @@
+//! The Monte Carlo benchmark: guidance x estimator combinations, many runs each, in
+//! parallel, aggregated into the paper's metrics with Welch t-tests of EER against each
+//! baseline.
+
+use std::collections::BTreeMap;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::run::{check_combination, run_once, EstimatorKind, RunError, RunOutput, RunSpec};
+use crate::config::Config;
+use crate::guidance::GuidanceKind;
+use crate::metrics::{mean_sd, median, welch_t_test, MeanSd, RunSummary, WelchResult};
+use crate::world::World;
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct MonteCarlo {
+    /// Guidance laws.
+    pub guidance: Vec<GuidanceKind>,
+    /// Estimators.
+    pub estimators: Vec<EstimatorKind>,
+    /// Runs per combination.
+    pub runs: u64,
+    /// User seed.
+    pub seed: u64,
+    /// Run length, s.
+    pub duration_s: f64,
+    /// Keep every run's step records (for CSV logs and plots).
+    pub keep_outputs: bool,
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+}
+
+/// A median, as the JSON schema wants it.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Median {
+    /// The median.
+    pub median: f64,
+}
+
+/// p-values of Welch t-tests of EER against this combination, per metric.
+#[derive(Debug, Clone, Serialize)]
+pub struct VersusEer {
+    /// On tracking error.
+    pub tracking_error_m: Option<WelchResult>,
+    /// On estimation error.
+    pub estimation_error_m: Option<WelchResult>,
+    /// On det of the covariance.
+    pub cov_det: Option<WelchResult>,
+    /// On %FOV.
+    pub fov_percent: Option<WelchResult>,
+}
+
+/// Aggregates of one guidance x estimator combination.
+#[derive(Debug, Clone, Serialize)]
+pub struct ComboResult {
+    /// Guidance law.
+    pub guidance: String,
+    /// Motion model / estimator.
+    pub motion: String,
+    /// Number of runs.
+    pub runs: usize,
+    /// Tracking error, m: mean and sd over runs of each run's mean.
+    pub tracking_error_m: MeanSd,
+    /// Estimation error, m.
+    pub estimation_error_m: MeanSd,
+    /// det of the covariance, m^4.
+    pub cov_det: MeanSd,
+    /// %FOV.
+    pub fov_percent: MeanSd,
+    /// Median filter step time over all steps of all runs, ms.
+    pub filter_step_ms: Median,
+    /// Median guidance step time, ms.
+    pub guidance_step_ms: Median,
+    /// Welch t-test of EER (same estimator) against this combination; absent for EER itself
+    /// or when EER was not run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub welch_vs_eer: Option<VersusEer>,
+    /// Per-run summaries.
+    pub per_run: Vec<RunSummary>,
+}
+
+/// The whole benchmark's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct MonteCarloResult {
+    /// One entry per combination that ran.
+    pub results: Vec<ComboResult>,
+    /// Combinations refused, with the reason.
+    pub refused: Vec<String>,
+    /// Seed used.
+    pub seed: u64,
+    /// Scenario name.
+    pub scenario: String,
+    /// Run length, s.
+    pub duration_s: f64,
+    /// Every run's output, by (guidance, motion), when asked to keep them.
+    #[serde(skip)]
+    pub outputs: BTreeMap<(String, String), Vec<RunOutput>>,
+}
+
+impl MonteCarlo {
+    /// Runs the benchmark. Combinations that make no sense are refused with their reason
+    /// (listed in the result); it is an error only if nothing is left to run.
+    pub fn run(&self, cfg: &Config) -> Result<MonteCarloResult, RunError> {
+        let world = World::from_config(cfg);
+        let mut combos = Vec::new();
+        let mut refused = Vec::new();
+        let mut first_err = None;
+        for g in &self.guidance {
+            for e in &self.estimators {
+                match check_combination(*g, e) {
+                    Ok(()) => combos.push((*g, e.clone())),
+                    Err(err) => {
+                        refused.push(err.to_string());
+                        first_err.get_or_insert(err);
+                    }
+                }
+            }
+        }
+        if combos.is_empty() {
+            return Err(
+                first_err.expect("no combination means at least one refusal or empty lists")
+            );
+        }
+        let jobs: Vec<(usize, u64)> = (0..combos.len())
+            .flat_map(|c| (0..self.runs).map(move |r| (c, r)))
+            .collect();
+        let bar = if self.progress {
+            let b = ProgressBar::new(jobs.len() as u64);
+            b.set_style(
+                ProgressStyle::with_template(
+                    "{bar:40} {pos}/{len} runs {elapsed_precise} eta {eta}",
+                )
+                .expect("static template"),
+            );
+            b
+        } else {
+            ProgressBar::hidden()
+        };
+        let snapshot_times: Vec<f64> = [1.0 / 6.0, 0.5, 5.0 / 6.0]
+            .iter()
+            .map(|f| f * self.duration_s)
+            .collect();
+        let outputs: Vec<Result<RunOutput, RunError>> = jobs
+            .par_iter()
+            .map(|&(c, r)| {
+                let (g, e) = &combos[c];
+                let spec = RunSpec {
+                    guidance: *g,
+                    estimator: e.clone(),
+                    seed: self.seed,
+                    run_index: r,
+                    duration_s: self.duration_s,
+                    snapshot_times_s: snapshot_times.clone(),
+                };
+                let out = run_once(cfg, &world, &spec);
+                bar.inc(1);
+                out
+            })
+            .collect();
+        bar.finish_and_clear();
+
+        let mut by_combo: Vec<Vec<RunOutput>> = vec![Vec::new(); combos.len()];
+        for ((c, _), out) in jobs.iter().zip(outputs) {
+            by_combo[*c].push(out?);
+        }
+        let mut results: Vec<ComboResult> = combos
+            .iter()
+            .zip(&by_combo)
+            .map(|((g, e), outs)| aggregate(*g, e, outs))
+            .collect();
+        // Welch tests of EER against every other law with the same estimator.
+        let eer_runs: BTreeMap<String, Vec<RunSummary>> = results
+            .iter()
+            .filter(|r| r.guidance == "eer")
+            .map(|r| (r.motion.clone(), r.per_run.clone()))
+            .collect();
+        for r in results.iter_mut().filter(|r| r.guidance != "eer") {
+            if let Some(eer) = eer_runs.get(&r.motion) {
+                let t = |f: fn(&RunSummary) -> f64| {
+                    let a: Vec<f64> = eer.iter().map(f).collect();
+                    let b: Vec<f64> = r.per_run.iter().map(f).collect();
+                    welch_t_test(&a, &b)
+                };
+                r.welch_vs_eer = Some(VersusEer {
+                    tracking_error_m: t(|s| s.tracking_error_m),
+                    estimation_error_m: t(|s| s.estimation_error_m),
+                    cov_det: t(|s| s.cov_det),
+                    fov_percent: t(|s| s.fov_percent),
+                });
+            }
+        }
+        let mut outputs_map = BTreeMap::new();
+        if self.keep_outputs {
+            for ((g, e), outs) in combos.iter().zip(by_combo) {
+                outputs_map.insert((g.to_string(), e.name().to_string()), outs);
+            }
+        }
+        Ok(MonteCarloResult {
+            results,
+            refused,
+            seed: self.seed,
+            scenario: cfg.name.clone(),
+            duration_s: self.duration_s,
+            outputs: outputs_map,
+        })
+    }
+}
+
+fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput]) -> ComboResult {
+    let per_run: Vec<RunSummary> = outs.iter().map(|o| o.summary).collect();
+    let col = |f: fn(&RunSummary) -> f64| mean_sd(&per_run.iter().map(f).collect::<Vec<_>>());
+    let all_filter: Vec<f64> = outs
+        .iter()
+        .flat_map(|o| o.filter_ms.iter().copied())
+        .collect();
+    let all_guid: Vec<f64> = outs
+        .iter()
+        .flat_map(|o| o.guidance_ms.iter().copied())
+        .collect();
+    ComboResult {
+        guidance: g.to_string(),
+        motion: e.name().to_string(),
+        runs: outs.len(),
+        tracking_error_m: col(|s| s.tracking_error_m),
+        estimation_error_m: col(|s| s.estimation_error_m),
+        cov_det: col(|s| s.cov_det),
+        fov_percent: col(|s| s.fov_percent),
+        filter_step_ms: Median {
+            median: median(&all_filter),
+        },
+        guidance_step_ms: Median {
+            median: median(&all_guid),
+        },
+        welch_vs_eer: None,
+        per_run,
+    }
+}

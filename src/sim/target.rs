@@ -1,0 +1,103 @@
+//! The simulated target: a unicycle that drives the road network's Markov chain.
+
+use rand::Rng;
+
+use crate::config::TargetConfig;
+use crate::world::geometry::{wrap_angle, Enu2};
+use crate::world::road::RoadNetwork;
+
+/// Target state in the world ENU frame.
+#[derive(Debug, Clone)]
+pub struct TargetSim {
+    /// Position, metres.
+    pub position_enu: Enu2,
+    /// Heading from east, counter-clockwise, radians.
+    pub heading_enu_rad: f64,
+    /// Index of the node it is driving to.
+    pub goal_node: usize,
+    params: TargetConfig,
+}
+
+impl TargetSim {
+    /// At the start node, facing its first sampled goal.
+    pub fn new<R: Rng + ?Sized>(road: &RoadNetwork, params: TargetConfig, rng: &mut R) -> Self {
+        let start = road.start;
+        let goal = road.sample_next(start, rng);
+        let p = road.nodes[start].position_enu;
+        let d = road.nodes[goal].position_enu - p;
+        Self {
+            position_enu: p,
+            heading_enu_rad: d.y.atan2(d.x),
+            goal_node: goal,
+            params,
+        }
+    }
+
+    /// Advances `dt_s`: switch goal near the current one, turn toward it (in place above the
+    /// heading-error threshold), drive at cruise speed.
+    pub fn step<R: Rng + ?Sized>(&mut self, road: &RoadNetwork, dt_s: f64, rng: &mut R) {
+        let p = &self.params;
+        let mut to_goal = road.nodes[self.goal_node].position_enu - self.position_enu;
+        if to_goal.norm() < p.goal_switch_radius_m {
+            self.goal_node = road.sample_next(self.goal_node, rng);
+            to_goal = road.nodes[self.goal_node].position_enu - self.position_enu;
+        }
+        let err = wrap_angle(to_goal.y.atan2(to_goal.x) - self.heading_enu_rad);
+        let yaw_rate =
+            (p.heading_gain_per_s * err).clamp(-p.max_yaw_rate_radps, p.max_yaw_rate_radps);
+        self.heading_enu_rad = wrap_angle(self.heading_enu_rad + yaw_rate * dt_s);
+        let speed = if err.abs() > p.turn_in_place_above_rad {
+            0.0
+        } else {
+            p.cruise_speed_mps.min(p.max_speed_mps)
+        };
+        self.position_enu +=
+            Enu2::new(self.heading_enu_rad.cos(), self.heading_enu_rad.sin()) * speed * dt_s;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+    use crate::rng::CoreRng;
+    use rand::SeedableRng;
+
+    #[test]
+    fn target_stays_on_the_roads_and_visits_nodes() {
+        let c = Config::default_lab();
+        let road = RoadNetwork::from_config(&c.road);
+        let mut rng = CoreRng::seed_from_u64(1);
+        let mut t = TargetSim::new(&road, c.target.clone(), &mut rng);
+        let edges = road.edges_enu();
+        let dist_to_road = |p: &Enu2| {
+            edges
+                .iter()
+                .map(|(a, b)| {
+                    let ab = b - a;
+                    let s = ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
+                    (p - (a + ab * s)).norm()
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        let mut goals = std::collections::BTreeSet::new();
+        let mut travelled = 0.0;
+        for _ in 0..(90 * 30) {
+            let before = t.position_enu;
+            t.step(&road, 1.0 / 30.0, &mut rng);
+            travelled += (t.position_enu - before).norm();
+            goals.insert(t.goal_node);
+            assert!(
+                dist_to_road(&t.position_enu) < 0.15,
+                "off road at {}",
+                t.position_enu
+            );
+        }
+        assert!(goals.len() >= 4, "{goals:?}");
+        // Cruise 0.3 m/s minus turning time.
+        assert!(
+            travelled > 0.6 * 0.3 * 90.0 && travelled <= 0.3 * 90.0 + 1e-9,
+            "{travelled}"
+        );
+    }
+}

@@ -1,0 +1,236 @@
+//! Planar geometry in the world ENU frame: points, axis-aligned bounds, polygons.
+
+use nalgebra::Vector2;
+use serde::{Deserialize, Serialize};
+
+/// A point or vector in the world frame: x east, y north, metres.
+pub type Enu2 = Vector2<f64>;
+
+/// An axis-aligned rectangle in the world ENU frame (metres).
+///
+/// Used as the workspace: where particles live and the geofence the agent may fly in.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoundsEnu {
+    /// Western edge, metres.
+    pub x_min_m: f64,
+    /// Eastern edge, metres.
+    pub x_max_m: f64,
+    /// Southern edge, metres.
+    pub y_min_m: f64,
+    /// Northern edge, metres.
+    pub y_max_m: f64,
+}
+
+impl BoundsEnu {
+    /// Whether `p` lies inside or on the edge.
+    pub fn contains(&self, p: &Enu2) -> bool {
+        p.x >= self.x_min_m && p.x <= self.x_max_m && p.y >= self.y_min_m && p.y <= self.y_max_m
+    }
+
+    /// The closest point of the rectangle to `p` (the geofence clamp).
+    pub fn clamp(&self, p: &Enu2) -> Enu2 {
+        Enu2::new(
+            p.x.clamp(self.x_min_m, self.x_max_m),
+            p.y.clamp(self.y_min_m, self.y_max_m),
+        )
+    }
+
+    /// Width along x, metres.
+    pub fn width_m(&self) -> f64 {
+        self.x_max_m - self.x_min_m
+    }
+
+    /// Height along y, metres.
+    pub fn height_m(&self) -> f64 {
+        self.y_max_m - self.y_min_m
+    }
+
+    /// Area in square metres.
+    pub fn area_m2(&self) -> f64 {
+        self.width_m() * self.height_m()
+    }
+
+    /// Centre point.
+    pub fn center(&self) -> Enu2 {
+        Enu2::new(
+            0.5 * (self.x_min_m + self.x_max_m),
+            0.5 * (self.y_min_m + self.y_max_m),
+        )
+    }
+}
+
+/// A simple polygon (no self-intersection) in the world ENU frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PolygonEnu {
+    vertices: Vec<Enu2>,
+    /// Cached bounding box for a cheap rejection before the crossing test.
+    bbox: BoundsEnu,
+}
+
+impl PolygonEnu {
+    /// Builds a polygon from at least three vertices, in either winding.
+    ///
+    /// Returns `None` when there are fewer than three vertices or any is not finite.
+    pub fn new(vertices: Vec<Enu2>) -> Option<Self> {
+        if vertices.len() < 3
+            || vertices
+                .iter()
+                .any(|v| !v.x.is_finite() || !v.y.is_finite())
+        {
+            return None;
+        }
+        let mut bbox = BoundsEnu {
+            x_min_m: f64::INFINITY,
+            x_max_m: f64::NEG_INFINITY,
+            y_min_m: f64::INFINITY,
+            y_max_m: f64::NEG_INFINITY,
+        };
+        for v in &vertices {
+            bbox.x_min_m = bbox.x_min_m.min(v.x);
+            bbox.x_max_m = bbox.x_max_m.max(v.x);
+            bbox.y_min_m = bbox.y_min_m.min(v.y);
+            bbox.y_max_m = bbox.y_max_m.max(v.y);
+        }
+        Some(Self { vertices, bbox })
+    }
+
+    /// An axis-aligned square of side `side_m` centred at `center`.
+    pub fn square(center: Enu2, side_m: f64) -> Self {
+        let h = 0.5 * side_m;
+        Self::new(vec![
+            Enu2::new(center.x - h, center.y - h),
+            Enu2::new(center.x + h, center.y - h),
+            Enu2::new(center.x + h, center.y + h),
+            Enu2::new(center.x - h, center.y + h),
+        ])
+        .expect("four finite vertices")
+    }
+
+    /// The vertices in the order given.
+    pub fn vertices(&self) -> &[Enu2] {
+        &self.vertices
+    }
+
+    /// The axis-aligned bounding box.
+    pub fn bbox(&self) -> &BoundsEnu {
+        &self.bbox
+    }
+
+    /// Point-in-polygon by the even-odd crossing rule; points on the boundary count as inside
+    /// only for axis-aligned edges (good enough for occlusion tests, which are measure-zero there).
+    pub fn contains(&self, p: &Enu2) -> bool {
+        if !self.bbox.contains(p) {
+            return false;
+        }
+        let mut inside = false;
+        let n = self.vertices.len();
+        let mut j = n - 1;
+        for i in 0..n {
+            let (vi, vj) = (self.vertices[i], self.vertices[j]);
+            if (vi.y > p.y) != (vj.y > p.y) {
+                let x_cross = vj.x + (p.y - vj.y) / (vi.y - vj.y) * (vi.x - vj.x);
+                if p.x < x_cross {
+                    inside = !inside;
+                }
+            }
+            j = i;
+        }
+        inside
+    }
+
+    /// Signed-area magnitude in square metres (shoelace formula).
+    pub fn area_m2(&self) -> f64 {
+        let n = self.vertices.len();
+        let mut s = 0.0;
+        for i in 0..n {
+            let a = self.vertices[i];
+            let b = self.vertices[(i + 1) % n];
+            s += a.x * b.y - b.x * a.y;
+        }
+        0.5 * s.abs()
+    }
+}
+
+/// Wraps an angle to (-pi, pi].
+pub fn wrap_angle(a: f64) -> f64 {
+    let mut x = a % std::f64::consts::TAU;
+    if x > std::f64::consts::PI {
+        x -= std::f64::consts::TAU;
+    } else if x <= -std::f64::consts::PI {
+        x += std::f64::consts::TAU;
+    }
+    x
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lab() -> BoundsEnu {
+        BoundsEnu {
+            x_min_m: -3.0,
+            x_max_m: 1.0,
+            y_min_m: -1.2,
+            y_max_m: 2.0,
+        }
+    }
+
+    #[test]
+    fn geofence_clamp_moves_outside_points_to_the_edge_and_keeps_inside_points() {
+        let b = lab();
+        assert_eq!(b.clamp(&Enu2::new(5.0, 5.0)), Enu2::new(1.0, 2.0));
+        assert_eq!(b.clamp(&Enu2::new(-9.0, -0.5)), Enu2::new(-3.0, -0.5));
+        let inside = Enu2::new(0.2, 0.3);
+        assert_eq!(b.clamp(&inside), inside);
+        assert!(b.contains(&b.clamp(&Enu2::new(-100.0, 100.0))));
+    }
+
+    #[test]
+    fn square_contains_its_centre_and_not_points_beyond_its_half_side() {
+        let sq = PolygonEnu::square(Enu2::new(-1.25, -0.6), 1.0);
+        assert!(sq.contains(&Enu2::new(-1.25, -0.6)));
+        assert!(sq.contains(&Enu2::new(-0.80, -0.15)));
+        assert!(!sq.contains(&Enu2::new(-0.70, -0.6)));
+        assert!(!sq.contains(&Enu2::new(-1.25, 0.0)));
+        assert!((sq.area_m2() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn concave_polygon_excludes_its_notch() {
+        // An L shape: the notch at (1.5, 1.5) is outside.
+        let l = PolygonEnu::new(vec![
+            Enu2::new(0.0, 0.0),
+            Enu2::new(2.0, 0.0),
+            Enu2::new(2.0, 1.0),
+            Enu2::new(1.0, 1.0),
+            Enu2::new(1.0, 2.0),
+            Enu2::new(0.0, 2.0),
+        ])
+        .unwrap();
+        assert!(l.contains(&Enu2::new(0.5, 1.5)));
+        assert!(l.contains(&Enu2::new(1.5, 0.5)));
+        assert!(!l.contains(&Enu2::new(1.5, 1.5)));
+        assert!((l.area_m2() - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn polygon_needs_three_finite_vertices() {
+        assert!(PolygonEnu::new(vec![Enu2::zeros(), Enu2::new(1.0, 0.0)]).is_none());
+        assert!(PolygonEnu::new(vec![
+            Enu2::zeros(),
+            Enu2::new(f64::NAN, 0.0),
+            Enu2::new(0.0, 1.0)
+        ])
+        .is_none());
+    }
+
+    #[test]
+    fn wrap_angle_stays_in_range() {
+        for k in -20..20 {
+            let a = 0.3 + k as f64 * std::f64::consts::TAU;
+            assert!((wrap_angle(a) - 0.3).abs() < 1e-9);
+        }
+        assert!((wrap_angle(std::f64::consts::PI * 3.0) - std::f64::consts::PI).abs() < 1e-9);
+    }
+}

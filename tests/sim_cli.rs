@@ -1,0 +1,217 @@
+//! `infotrack sim` and `infotrack bench` as a user runs them: real process, real files.
+
+use std::path::Path;
+use std::process::Command;
+
+fn infotrack() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_infotrack"))
+}
+
+fn num(v: &serde_json::Value, path: &[&str]) -> f64 {
+    let mut cur = v;
+    for p in path {
+        cur = &cur[*p];
+    }
+    cur.as_f64()
+        .unwrap_or_else(|| panic!("{path:?} is not a number in {v}"))
+}
+
+#[test]
+fn sim_writes_the_json_schema_the_table_and_the_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("r.json");
+    let out = dir.path().join("out");
+    let o = infotrack()
+        .args([
+            "sim",
+            "--runs",
+            "2",
+            "--duration",
+            "15",
+            "--quiet",
+            "--seed",
+            "3",
+        ])
+        .args(["--guidance", "eer,pfwm,lawn,kf,truth", "--motion", "cv,kf"])
+        .arg("--json")
+        .arg(&json)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // The two particle-only laws are refused with kf, with the reason, and the rest run.
+    assert!(
+        stdout.contains("refused: guidance `eer` cannot run with motion `kf`"),
+        "{stdout}"
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let results = v["results"].as_array().unwrap();
+    assert_eq!(results.len(), 8);
+    for r in results {
+        assert_eq!(r["runs"].as_u64(), Some(2));
+        let g = r["guidance"].as_str().unwrap();
+        let m = r["motion"].as_str().unwrap();
+        assert!(["eer", "pfwm", "lawn", "kf", "truth"].contains(&g));
+        assert!(["cv", "kf"].contains(&m));
+        for key in [
+            "tracking_error_m",
+            "estimation_error_m",
+            "cov_det",
+            "fov_percent",
+        ] {
+            let mean = num(r, &[key, "mean"]);
+            let sd = num(r, &[key, "sd"]);
+            assert!(
+                mean.is_finite() && mean >= 0.0 && sd.is_finite() && sd >= 0.0,
+                "{g}/{m} {key}"
+            );
+        }
+        assert!(num(r, &["fov_percent", "mean"]) <= 100.0);
+        assert!(num(r, &["filter_step_ms", "median"]) >= 0.0);
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.starts_with(&format!("{g:<6} {m:<6}"))),
+            "table row {g}/{m}"
+        );
+    }
+    let eer = results.iter().find(|r| r["guidance"] == "eer").unwrap();
+    assert!(num(eer, &["guidance_step_ms", "median"]) > 0.0);
+    // Per-step CSV of each run, and the plots.
+    let csv = std::fs::read_to_string(out.join("eer_cv/run001.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 45, "header + 15 s at 3 Hz");
+    for png in [
+        "metrics.png",
+        "eer_cv/scene_run000.png",
+        "truth_kf/estimation_error_run000.png",
+    ] {
+        let bytes = std::fs::read(out.join(png)).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG", "{png}");
+    }
+}
+
+#[test]
+fn sim_is_deterministic_for_a_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |seed: &str, name: &str| {
+        let json = dir.path().join(name);
+        let o = infotrack()
+            .args([
+                "sim",
+                "--runs",
+                "2",
+                "--duration",
+                "10",
+                "--quiet",
+                "--guidance",
+                "eer,lawn",
+                "--seed",
+                seed,
+            ])
+            .arg("--json")
+            .arg(&json)
+            .output()
+            .unwrap();
+        assert!(o.status.success());
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        // Everything but the wall-clock timings.
+        v["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|r| {
+                r["per_run"].as_array().unwrap().iter().flat_map(|p| {
+                    [
+                        "tracking_error_m",
+                        "estimation_error_m",
+                        "cov_det",
+                        "fov_percent",
+                    ]
+                    .map(|k| p[k].as_f64().unwrap())
+                })
+            })
+            .collect::<Vec<f64>>()
+    };
+    let a = run("5", "a.json");
+    assert_eq!(a.len(), 2 * 2 * 4);
+    assert_eq!(a, run("5", "b.json"));
+    assert_ne!(a, run("6", "c.json"));
+}
+
+#[test]
+fn bad_input_gives_a_clear_error_and_no_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    let default =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/default.toml"))
+            .unwrap();
+    std::fs::write(&bad, default.replace("particles = 500", "particles = 0")).unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["sim".into(), "--config".into(), bad.display().to_string()],
+            "filter.particles",
+        ),
+        (
+            vec!["sim".into(), "--config".into(), "/no/such/file.toml".into()],
+            "/no/such/file.toml",
+        ),
+        (
+            vec!["sim".into(), "--guidance".into(), "eer,zigzag".into()],
+            "zigzag",
+        ),
+        (vec!["sim".into(), "--motion".into(), "warp".into()], "warp"),
+        (
+            vec![
+                "sim".into(),
+                "--guidance".into(),
+                "eer".into(),
+                "--motion".into(),
+                "kf".into(),
+            ],
+            "needs a particle set",
+        ),
+        (vec!["sim".into(), "--runs".into(), "0".into()], "--runs"),
+    ];
+    for (args, needle) in cases {
+        let o = infotrack().args(&args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} should fail");
+        assert!(
+            stderr.contains(needle),
+            "{args:?}: stderr lacks `{needle}`: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn bench_prints_the_table_and_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("b.json");
+    let o = infotrack()
+        .args(["bench", "--repetitions", "3", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for k in [
+        ["pf_step_ms", "n500"],
+        ["pf_step_ms", "n5000"],
+        ["eer_cycle_ms", "nh25"],
+        ["eer_cycle_ms", "nh100"],
+        ["eer_cycle_ms", "nh500"],
+    ] {
+        assert!(num(&v, &k) > 0.0, "{k:?}");
+    }
+    assert!(v["eer_candidates"].as_u64().unwrap() >= 256);
+}
