@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
 # Installs what infotrack needs to build and run on a fresh Debian machine with Rust:
-# Debian packages for font rendering in plots (fontconfig, freetype, DejaVu fonts) and
-# pkg-config. Idempotent: does nothing when everything is present.
+# - Debian packages for font rendering in plots (fontconfig, freetype, DejaVu fonts) and
+#   pkg-config;
+# - the ONNX Runtime shared library (for the learned motion model), taken from PyPI's
+#   onnxruntime==1.31.1 wheel into .deps/onnxruntime/.
+# Idempotent: does nothing when everything is present.
 set -euo pipefail
+cd "$(dirname "$0")/.."
 
 need=()
 for pkg in pkg-config libfontconfig1-dev libfreetype-dev fonts-dejavu-core; do
@@ -19,3 +23,29 @@ fi
 for tool in cargo rustfmt cargo-clippy; do
   command -v "$tool" >/dev/null 2>&1 || { echo "setup: $tool not found; install Rust with rustup (components rustfmt, clippy)" >&2; exit 1; }
 done
+
+ORT_VERSION=1.31.1
+ORT_DIR=.deps/onnxruntime
+if [ ! -f "$ORT_DIR/libonnxruntime.so.$ORT_VERSION" ]; then
+  echo "setup: fetching ONNX Runtime $ORT_VERSION (PyPI wheel onnxruntime==$ORT_VERSION) into $ORT_DIR" >&2
+  command -v python3 >/dev/null 2>&1 || { echo "setup: python3 with pip is needed to fetch ONNX Runtime" >&2; exit 1; }
+  tmp=$(mktemp -d)
+  python3 -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
+    -d "$tmp" "onnxruntime==$ORT_VERSION"
+  mkdir -p "$ORT_DIR"
+  python3 - "$tmp" "$ORT_DIR" <<'PY'
+import glob, os, sys, zipfile
+src, dst = sys.argv[1], sys.argv[2]
+wheels = glob.glob(os.path.join(src, "onnxruntime-*.whl"))
+if not wheels:
+    sys.exit("setup: no onnxruntime wheel was downloaded")
+with zipfile.ZipFile(wheels[0]) as z:
+    libs = [n for n in z.namelist() if n.startswith("onnxruntime/capi/libonnxruntime")]
+    if not libs:
+        sys.exit(f"setup: {wheels[0]} has no libonnxruntime")
+    for n in libs:
+        with z.open(n) as f, open(os.path.join(dst, os.path.basename(n)), "wb") as out:
+            out.write(f.read())
+PY
+  rm -rf "$tmp"
+fi

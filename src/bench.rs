@@ -11,7 +11,8 @@ use crate::config::Config;
 use crate::estimation::{FilterParams, ParticleFilter};
 use crate::guidance::{EerParams, EerPlanner};
 use crate::metrics::median;
-use crate::motion::ConstantVelocity;
+use crate::motion::dmmn::Dmmn;
+use crate::motion::{ConstantVelocity, MotionModel};
 use crate::rng::CoreRng;
 use crate::world::geometry::Enu2;
 use crate::world::World;
@@ -26,21 +27,27 @@ pub struct PfFixture {
     /// The filter.
     pub pf: ParticleFilter,
     /// Its motion model.
-    pub model: ConstantVelocity,
+    pub model: Box<dyn MotionModel>,
     /// Random stream.
     pub rng: CoreRng,
     k: u64,
 }
 
 impl PfFixture {
-    /// Builds the fixture and warms the filter up.
+    /// Builds the fixture with the constant-velocity model and warms the filter up.
     pub fn new(n: usize, seed: u64) -> Self {
+        let cfg = Config::default_lab();
+        let model = ConstantVelocity::new(cfg.motion.cv_max_speed_mps, cfg.filter_dt_s());
+        Self::with_model(n, seed, Box::new(model))
+    }
+
+    /// Builds the fixture with `model` and warms the filter up.
+    pub fn with_model(n: usize, seed: u64, model: Box<dyn MotionModel>) -> Self {
         let mut cfg = Config::default_lab();
         cfg.filter.particles = n;
         let world = World::from_config(&cfg);
         let mut rng = CoreRng::seed_from_u64(seed);
         let pf = ParticleFilter::new(FilterParams::from_config(&cfg), cfg.workspace_enu, &mut rng);
-        let model = ConstantVelocity::new(cfg.motion.cv_max_speed_mps, cfg.filter_dt_s());
         let mut f = Self {
             cfg,
             world,
@@ -69,8 +76,8 @@ impl PfFixture {
         let z = (self.k % 3 != 0 && !self.world.is_occluded(&t))
             .then(|| self.world.measurement.measure(&t, &mut self.rng));
         self.pf
-            .step(&mut self.model, z, &agent, &self.world, &mut self.rng)
-            .expect("the constant-velocity model cannot fail");
+            .step(self.model.as_mut(), z, &agent, &self.world, &mut self.rng)
+            .expect("the benchmark's motion model failed");
     }
 }
 
@@ -85,16 +92,20 @@ pub struct EerFixture {
 }
 
 impl EerFixture {
-    /// N = `n` particles, N_H = `n_h`, K = 4.
+    /// N = `n` particles, N_H = `n_h`, K = 4, constant-velocity model.
     pub fn new(n: usize, n_h: usize, seed: u64) -> Self {
-        let mut pf = PfFixture::new(n, seed);
+        Self::with_fixture(PfFixture::new(n, seed), n_h)
+    }
+
+    /// N_H = `n_h`, K = 4, on a prepared filter fixture.
+    pub fn with_fixture(mut pf: PfFixture, n_h: usize) -> Self {
         let mut cfg = pf.cfg.clone();
         cfg.guidance.entropy_particles = n_h;
         cfg.guidance.horizon_steps = 4;
         let mut planner = EerPlanner::new(EerParams::from_config(&cfg));
         planner
-            .prepare(&pf.pf, &mut pf.model, &pf.world, &mut pf.rng)
-            .expect("cv cannot fail");
+            .prepare(&pf.pf, pf.model.as_mut(), &pf.world, &mut pf.rng)
+            .expect("the benchmark's motion model failed");
         let agent_enu = Enu2::new(-1.0, 0.4);
         Self {
             pf,
@@ -107,8 +118,8 @@ impl EerFixture {
     pub fn prepare(&mut self) {
         let p = &mut self.pf;
         self.planner
-            .prepare(&p.pf, &mut p.model, &p.world, &mut p.rng)
-            .expect("cv cannot fail");
+            .prepare(&p.pf, p.model.as_mut(), &p.world, &mut p.rng)
+            .expect("the benchmark's motion model failed");
     }
 
     /// Candidates, EER of each, argmax; returns the candidate count.
@@ -160,6 +171,25 @@ pub struct RolloutTimes {
     pub nh500: f64,
 }
 
+/// Timings with the learned model (`None` in the report when it could not be loaded).
+#[derive(Debug, Clone, Serialize)]
+pub struct DmmnTimes {
+    /// Model file.
+    pub model: String,
+    /// Its parameter count.
+    pub parameters: u64,
+    /// One inference at batch 500, ms.
+    pub infer_batch500_ms: f64,
+    /// One inference at batch 25, ms.
+    pub infer_batch25_ms: f64,
+    /// One inference at batch 1, ms.
+    pub infer_batch1_ms: f64,
+    /// PF step with the DMMN at N = 500, ms.
+    pub pf_step_n500_ms: f64,
+    /// EER rollout with the DMMN, N_H = 500, K = 4, ms.
+    pub eer_rollout_nh500_ms: f64,
+}
+
 /// What `infotrack bench` measures.
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
@@ -173,10 +203,55 @@ pub struct BenchReport {
     pub eer_rollout_cv_ms: RolloutTimes,
     /// Repetitions per median.
     pub repetitions: usize,
+    /// The learned model's timings.
+    pub dmmn: Option<DmmnTimes>,
+    /// Why the learned model's timings are missing, if they are.
+    pub dmmn_skipped: Option<String>,
 }
 
-/// Runs the timings on the current thread.
-pub fn run(repetitions: usize, seed: u64) -> BenchReport {
+/// Times the DMMN at `model_path`.
+pub fn run_dmmn(
+    model_path: &std::path::Path,
+    repetitions: usize,
+    seed: u64,
+) -> Result<DmmnTimes, String> {
+    let mut cfg = Config::default_lab();
+    cfg.motion.dmmn_model = model_path.to_path_buf();
+    let load = || Dmmn::load(model_path, &cfg).map_err(|e| e.to_string());
+    let mut m = load()?;
+    let parameters = m.metadata().parameters;
+    let reps = repetitions.min(200);
+    let mut infer = |n: usize| {
+        let f = PfFixture::new(n, seed);
+        let input: Vec<f32> =
+            f.pf.histories()
+                .as_slice()
+                .iter()
+                .map(|v| *v as f32)
+                .collect();
+        time_median(reps, || {
+            m.predict_raw(&input, n).expect("inference failed");
+        })
+    };
+    let (b500, b25, b1) = (infer(500), infer(25), infer(1));
+    let mut pf = PfFixture::with_model(500, seed, Box::new(load()?));
+    let pf_ms = time_median(reps, || pf.step());
+    let mut eer =
+        EerFixture::with_fixture(PfFixture::with_model(500, seed, Box::new(load()?)), 500);
+    let rollout = time_median(reps.min(100), || eer.prepare());
+    Ok(DmmnTimes {
+        model: model_path.display().to_string(),
+        parameters,
+        infer_batch500_ms: b500,
+        infer_batch25_ms: b25,
+        infer_batch1_ms: b1,
+        pf_step_n500_ms: pf_ms,
+        eer_rollout_nh500_ms: rollout,
+    })
+}
+
+/// Runs the timings on the current thread; the DMMN rows use `model` when it loads.
+pub fn run(repetitions: usize, seed: u64, model: &std::path::Path) -> BenchReport {
     let pf_time = |n: usize| {
         let mut f = PfFixture::new(n, seed);
         time_median(repetitions, || f.step())
@@ -211,12 +286,25 @@ pub fn run(repetitions: usize, seed: u64) -> BenchReport {
             nh500: r500,
         },
         repetitions,
+        dmmn: None,
+        dmmn_skipped: None,
+    }
+    .with_dmmn(run_dmmn(model, repetitions, seed))
+}
+
+impl BenchReport {
+    fn with_dmmn(mut self, r: Result<DmmnTimes, String>) -> Self {
+        match r {
+            Ok(t) => self.dmmn = Some(t),
+            Err(e) => self.dmmn_skipped = Some(e),
+        }
+        self
     }
 }
 
 /// The report as a table, with the targets of the core issue beside the figures.
 pub fn render(r: &BenchReport) -> String {
-    format!(
+    let mut s = format!(
         "infotrack bench (one thread, medians of {} repetitions)\n\
          {:<44} {:>10} {:>12}\n\
          {:<44} {:>10.4} {:>12}\n\
@@ -257,5 +345,29 @@ pub fn render(r: &BenchReport) -> String {
         r.eer_rollout_cv_ms.nh500,
         "-",
         r.eer_candidates
-    )
+    );
+    match (&r.dmmn, &r.dmmn_skipped) {
+        (Some(d), _) => {
+            s += &format!(
+                "DMMN {} ({} parameters), ONNX Runtime, one intra-op thread\n",
+                d.model, d.parameters
+            );
+            for (what, v, target) in [
+                ("DMMN inference, batch 500", d.infer_batch500_ms, "-"),
+                ("DMMN inference, batch 25", d.infer_batch25_ms, "-"),
+                ("DMMN inference, batch 1", d.infer_batch1_ms, "-"),
+                ("PF step, N = 500, DMMN", d.pf_step_n500_ms, "<= 1"),
+                (
+                    "EER rollout (DMMN), N_H = 500, K = 4",
+                    d.eer_rollout_nh500_ms,
+                    "<= 4",
+                ),
+            ] {
+                s += &format!("{what:<44} {v:>10.4} {target:>12}\n");
+            }
+        }
+        (None, Some(why)) => s += &format!("DMMN rows skipped: {why}\n"),
+        (None, None) => {}
+    }
+    s
 }

@@ -32,6 +32,25 @@ enum Command {
     Sim(SimArgs),
     /// Time the core (PF step, EER cycle) on one thread and print a table.
     Bench(BenchArgs),
+    /// Record noisy target positions from the simulated scenario, as a flight-log CSV, to
+    /// train a motion model on (training/train_dmmn.py).
+    Dataset(DatasetArgs),
+}
+
+#[derive(clap::Args)]
+struct DatasetArgs {
+    /// Scenario file; without it, the embedded config/default.toml.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Seconds of target motion to record.
+    #[arg(long, default_value_t = 1800.0)]
+    duration: f64,
+    /// Seed (default: the config's `seed`).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Output CSV file.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -51,7 +70,7 @@ struct SimArgs {
     /// Guidance laws, comma-separated, of eer, pfwm, lawn, kf, truth.
     #[arg(long, default_value = "eer,pfwm,lawn,kf", value_delimiter = ',')]
     guidance: Vec<String>,
-    /// Motion models / estimators, comma-separated, of cv, kf.
+    /// Motion models / estimators, comma-separated, of cv, dmmn, kf.
     #[arg(long, default_value = "cv", value_delimiter = ',')]
     motion: Vec<String>,
     /// Write the summary as JSON here.
@@ -79,6 +98,9 @@ struct BenchArgs {
     /// Also write the figures as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// The learned model to time (its rows are skipped, with the reason, if it does not load).
+    #[arg(long, default_value = "models/dmmn.onnx")]
+    model: PathBuf,
 }
 
 fn main() -> ExitCode {
@@ -97,6 +119,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Sim(a) => sim(a),
         Command::Bench(a) => bench(a),
+        Command::Dataset(a) => dataset(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -192,11 +215,32 @@ fn bench(a: BenchArgs) -> Result<()> {
     if a.repetitions == 0 {
         bail!("--repetitions must be at least 1");
     }
-    let r = infotrack::bench::run(a.repetitions, a.seed);
+    let r = infotrack::bench::run(a.repetitions, a.seed, &a.model);
     print!("{}", infotrack::bench::render(&r));
     if let Some(p) = &a.json {
         report::write_json(p, &r)?;
         println!("wrote {}", p.display());
     }
+    Ok(())
+}
+
+fn dataset(a: DatasetArgs) -> Result<()> {
+    let cfg = load_config(a.config.as_deref())?;
+    if !(a.duration.is_finite() && a.duration > 0.0) {
+        bail!(
+            "--duration must be a positive number of seconds, got {}",
+            a.duration
+        );
+    }
+    let steps = infotrack::sim::dataset::record(&cfg, a.seed.unwrap_or(cfg.seed), a.duration);
+    report::csv::write(&a.out, &steps)?;
+    println!(
+        "wrote {} positions ({} s at {} Hz) of scenario {} to {}",
+        steps.len(),
+        a.duration,
+        cfg.timing.filter_hz,
+        cfg.name,
+        a.out.display()
+    );
     Ok(())
 }

@@ -224,6 +224,18 @@ pub struct FilterConfig {
 pub struct MotionConfig {
     /// Particle constant-velocity model: the largest speed a particle is given, m/s.
     pub cv_max_speed_mps: f64,
+    /// The learned model for `--motion dmmn`: an ONNX file with `dmmn.json` beside it.
+    /// A relative path is taken from the current directory.
+    #[serde(default = "default_dmmn_model")]
+    pub dmmn_model: PathBuf,
+    /// The ONNX Runtime shared library to load; default: `ORT_DYLIB_PATH`, then
+    /// `.deps/onnxruntime/libonnxruntime.so.1.31.1` (installed by `scripts/setup.sh`).
+    #[serde(default)]
+    pub onnxruntime_library: Option<PathBuf>,
+}
+
+fn default_dmmn_model() -> PathBuf {
+    PathBuf::from("models/dmmn.onnx")
 }
 
 /// The constant-velocity Kalman filter, state `[x, y, vx, vy]` in the world ENU frame.

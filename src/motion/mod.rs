@@ -6,6 +6,7 @@
 //! deterministic; the filter adds the process noise.
 
 pub mod constant_velocity;
+pub mod dmmn;
 pub mod histories;
 
 use thiserror::Error;
@@ -17,7 +18,7 @@ use crate::config::Config;
 use crate::world::geometry::Enu2;
 
 /// Names of the motion models a particle filter can use (`--motion`).
-pub const MODEL_NAMES: &[&str] = &["cv"];
+pub const MODEL_NAMES: &[&str] = &["cv", "dmmn"];
 
 /// Builds the named motion model for a configuration.
 pub fn build(name: &str, cfg: &Config) -> Result<Box<dyn MotionModel>, MotionError> {
@@ -26,6 +27,7 @@ pub fn build(name: &str, cfg: &Config) -> Result<Box<dyn MotionModel>, MotionErr
             cfg.motion.cv_max_speed_mps,
             cfg.filter_dt_s(),
         ))),
+        "dmmn" => Ok(Box::new(dmmn::Dmmn::load(&cfg.motion.dmmn_model, cfg)?)),
         other => Err(MotionError::Backend {
             model: other.to_string(),
             message: format!(

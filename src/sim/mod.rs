@@ -1,6 +1,7 @@
 //! Simulators and the closed-loop run that the Monte Carlo benchmark repeats.
 
 pub mod agent;
+pub mod dataset;
 pub mod monte_carlo;
 pub mod run;
 pub mod target;

@@ -1,0 +1,199 @@
+//! The shipped DMMN through ONNX Runtime: parity with PyTorch, use inside the particle
+//! filter, and clear errors for bad model files. Needs the ONNX Runtime library that
+//! `scripts/setup.sh` installs.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use infotrack::config::Config;
+use infotrack::motion::dmmn::Dmmn;
+use infotrack::motion::{Histories, MotionModel};
+use infotrack::world::geometry::Enu2;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn lab_config() -> Config {
+    let mut c = Config::default_lab();
+    c.motion.dmmn_model = root().join("models/dmmn.onnx");
+    c
+}
+
+#[test]
+fn rust_outputs_match_pytorch_within_1e_4() {
+    let c = lab_config();
+    let mut m = Dmmn::load(&c.motion.dmmn_model, &c).unwrap();
+    let fixture: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(root().join("models/dmmn_parity.json")).unwrap(),
+    )
+    .unwrap();
+    let inputs: Vec<f32> = fixture["inputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|row| {
+            row.as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap() as f32)
+        })
+        .collect();
+    let expected: Vec<f32> = fixture["outputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|row| {
+            row.as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap() as f32)
+        })
+        .collect();
+    let n = expected.len() / 2;
+    assert!(n >= 32, "fixture has {n} cases");
+    assert_eq!(inputs.len(), n * 10 * 2);
+    let got = m.predict_raw(&inputs, n).unwrap();
+    let worst = got
+        .iter()
+        .zip(&expected)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst <= 1e-4, "largest difference {worst}");
+
+    // The same through the MotionModel interface (f64 histories), one batch.
+    let mut h = Histories::new(n, 10);
+    for i in 0..n {
+        let tr = h.track_mut(i);
+        for (t, v) in tr.iter_mut().enumerate() {
+            *v = inputs[i * 20 + t] as f64;
+        }
+    }
+    let mut out = vec![Enu2::zeros(); n];
+    m.predict(&h, &mut out).unwrap();
+    for i in 0..n {
+        assert!((out[i].x - expected[2 * i] as f64).abs() <= 1e-4);
+        assert!((out[i].y - expected[2 * i + 1] as f64).abs() <= 1e-4);
+    }
+}
+
+#[test]
+fn a_target_driving_straight_is_predicted_ahead() {
+    // On the road from B (0.35, -0.6) north to C (0.35, 1.0) at 0.1 m per step, the next
+    // position is about 0.1 m further north.
+    let c = lab_config();
+    let mut m = Dmmn::load(&c.motion.dmmn_model, &c).unwrap();
+    let mut h = Histories::new(1, 10);
+    for k in 0..10 {
+        h.push(&[Enu2::new(0.35, -0.4 + 0.1 * k as f64)]);
+    }
+    let mut out = [Enu2::zeros()];
+    m.predict(&h, &mut out).unwrap();
+    let step = out[0] - h.newest(0);
+    assert!(
+        step.y > 0.04 && step.y < 0.2 && step.x.abs() < 0.06,
+        "{step}"
+    );
+}
+
+#[test]
+fn metadata_that_disagrees_with_the_config_is_refused() {
+    let mut c = lab_config();
+    c.filter.history_len = 8;
+    let err = Dmmn::load(&c.motion.dmmn_model, &c)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("K_in = 10") && err.contains("filter.history_len = 8"),
+        "{err}"
+    );
+    let mut c = lab_config();
+    c.timing.filter_hz = 5.0;
+    let err = Dmmn::load(&c.motion.dmmn_model, &c)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("timing.filter_hz"), "{err}");
+}
+
+#[test]
+fn missing_model_and_wrong_shape_are_clear_errors() {
+    let c = lab_config();
+    let err = Dmmn::load(Path::new("/nonexistent/dmmn.onnx"), &c)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("/nonexistent/dmmn.onnx") && err.contains("not found"),
+        "{err}"
+    );
+    let bad = root().join("tests/fixtures/dmmn_k5.onnx");
+    let err = Dmmn::load(&bad, &c).unwrap_err().to_string();
+    assert!(
+        err.contains("dmmn_k5.onnx") && err.contains("expected f32 [-1, 10, 2]"),
+        "{err}"
+    );
+}
+
+#[test]
+fn sim_runs_the_dmmn_in_the_filter_and_reports_a_missing_runtime() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("r.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .current_dir(root())
+        .args([
+            "sim",
+            "--runs",
+            "1",
+            "--duration",
+            "20",
+            "--quiet",
+            "--guidance",
+            "truth,eer",
+            "--motion",
+            "dmmn",
+        ])
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for r in v["results"].as_array().unwrap() {
+        assert_eq!(r["motion"], "dmmn");
+        let e = r["estimation_error_m"]["mean"].as_f64().unwrap();
+        assert!(e.is_finite() && e < 1.5, "{e}");
+    }
+
+    // A configured library that does not exist: the error says how to install one.
+    let cfg = dir.path().join("c.toml");
+    let text = std::fs::read_to_string(root().join("config/default.toml"))
+        .unwrap()
+        .replace(
+            "cv_max_speed_mps = 0.7",
+            "cv_max_speed_mps = 0.7\nonnxruntime_library = \"/nonexistent/libonnxruntime.so\"",
+        );
+    std::fs::write(&cfg, text).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .current_dir(root())
+        .args([
+            "sim",
+            "--runs",
+            "1",
+            "--duration",
+            "5",
+            "--quiet",
+            "--motion",
+            "dmmn",
+            "--config",
+        ])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        stderr.contains("ONNX Runtime library not found") && stderr.contains("scripts/setup.sh"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
