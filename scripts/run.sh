@@ -6,4 +6,4 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 cargo build --release --quiet
-exec ./target/release/infotrack sim --runs 10 --guidance eer,pfwm,lawn,kf --motion cv --out out --json out/results.json "$@"
+exec ./target/release/infotrack sim --runs 10 --guidance eer,pfwm,lawn,kf --motion dmmn --out out --json out/results.json "$@"
