@@ -11,16 +11,20 @@
 //! * [`metrics`]: per-step and per-run metrics and the statistics that compare methods.
 //! * [`report`]: tables, CSV logs, JSON and plots.
 //! * [`config`]: the TOML configuration, validated at load time.
+//! * [`autopilot`]: MAVLink frames, modes, parameter files and the vehicle link.
+//! * [`mock`]: a SITL-free mock autopilot (PX4 and ArduPilot flavours).
 //!
 //! All frames are named: `_enu` is the world frame (x east, y north, metres), the
 //! frame the paper's scenario is written in.
 #![deny(missing_docs)]
 
+pub mod autopilot;
 pub mod bench;
 pub mod config;
 pub mod estimation;
 pub mod guidance;
 pub mod metrics;
+pub mod mock;
 pub mod motion;
 pub mod report;
 pub mod rng;

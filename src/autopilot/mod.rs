@@ -1,0 +1,6 @@
+//! Talking to a PX4 or ArduPilot vehicle over MAVLink: frames, modes, parameter files and
+//! the vehicle link.
+
+pub mod frames;
+pub mod modes;
+pub mod params_file;

@@ -1,0 +1,304 @@
+use super::*;
+
+const GCS: MavHeader = MavHeader {
+    system_id: 255,
+    component_id: 191,
+    sequence: 0,
+};
+
+fn cmd(command: MavCmd, p: [f32; 7]) -> MavMessage {
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: p[0],
+        param2: p[1],
+        param3: p[2],
+        param4: p[3],
+        param5: p[4],
+        param6: p[5],
+        param7: p[6],
+        command,
+        target_system: 1,
+        target_component: 1,
+        confirmation: 0,
+    })
+}
+
+fn ack_of(out: &[MavMessage]) -> MavResult {
+    out.iter()
+        .find_map(|m| match m {
+            MavMessage::COMMAND_ACK(a) => Some(a.result),
+            _ => None,
+        })
+        .expect("a COMMAND_ACK")
+}
+
+fn setpoint(ned: [f32; 3]) -> MavMessage {
+    MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        x: ned[0],
+        y: ned[1],
+        z: ned[2],
+        type_mask: PositionTargetTypemask::from_bits_truncate(3576),
+        target_system: 1,
+        target_component: 1,
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..Default::default()
+    })
+}
+
+fn set_mode(m: &mut MockAutopilot, t: f64, mode: Mode) -> MavResult {
+    let (p2, p3) = mode.do_set_mode_params(m.flavor()).unwrap();
+    ack_of(&m.handle(
+        t,
+        &GCS,
+        &cmd(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, p2, p3, 0.0, 0.0, 0.0, 0.0],
+        ),
+    ))
+}
+
+fn arm(m: &mut MockAutopilot, t: f64) -> MavResult {
+    ack_of(&m.handle(
+        t,
+        &GCS,
+        &cmd(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ),
+    ))
+}
+
+/// Streams a setpoint at 20 Hz from t0 to t1 and ticks the vehicle.
+fn stream(m: &mut MockAutopilot, t0: f64, t1: f64, sp: Option<[f32; 3]>) -> f64 {
+    let mut t = t0;
+    while t < t1 {
+        t += 0.05;
+        if let Some(p) = sp {
+            m.handle(t, &GCS, &setpoint(p));
+        }
+        m.tick(t);
+    }
+    t
+}
+
+#[test]
+fn px4_refuses_offboard_without_setpoints_then_flies_offboard() {
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::Px4), 0.0);
+    assert_eq!(
+        set_mode(&mut m, 0.1, Mode::Offboard),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    let t = stream(&mut m, 0.1, 1.5, Some([5.0, 3.0, -10.0]));
+    assert_eq!(
+        set_mode(&mut m, t, Mode::Offboard),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(arm(&mut m, t), MavResult::MAV_RESULT_ACCEPTED);
+    let t = stream(&mut m, t, t + 15.0, Some([5.0, 3.0, -10.0]));
+    let p = m.position_ned_m();
+    assert!(
+        (p[0] - 5.0).abs() < 0.2 && (p[1] - 3.0).abs() < 0.2 && (p[2] + 10.0).abs() < 0.2,
+        "{p:?} at {t}"
+    );
+}
+
+#[test]
+fn arming_is_refused_until_the_estimator_is_ready() {
+    let mut cfg = MockConfig::new(Flavor::ArduPilot);
+    cfg.estimator_ready_after_s = 5.0;
+    let mut m = MockAutopilot::new(cfg, 0.0);
+    assert_eq!(arm(&mut m, 1.0), MavResult::MAV_RESULT_FAILED);
+    m.tick(6.0);
+    assert_eq!(arm(&mut m, 6.0), MavResult::MAV_RESULT_ACCEPTED);
+}
+
+#[test]
+fn px4_offboard_loss_switches_to_the_configured_action_and_back() {
+    let mut cfg = MockConfig::new(Flavor::Px4);
+    cfg.param_overrides = vec![("COM_OBL_RC_ACT".into(), 5.0)];
+    let mut m = MockAutopilot::new(cfg, 0.0);
+    let t = stream(&mut m, 0.0, 1.5, Some([0.0, 0.0, -5.0]));
+    set_mode(&mut m, t, Mode::Offboard);
+    arm(&mut m, t);
+    let t = stream(&mut m, t, t + 5.0, Some([0.0, 0.0, -5.0]));
+    // Stream stops: after COM_OF_LOSS_T (1 s) the vehicle holds.
+    let t = stream(&mut m, t, t + 0.8, None);
+    assert_eq!(m.mode(), Mode::Offboard);
+    let t = stream(&mut m, t, t + 0.5, None);
+    assert_eq!(m.mode(), Mode::Hold);
+    assert!(matches!(
+        m.take_events().as_slice(),
+        [MockEvent::Failsafe {
+            mode: Mode::Hold,
+            ..
+        }]
+    ));
+    // Setpoints resume: back to OFFBOARD by itself.
+    stream(&mut m, t, t + 0.2, Some([0.0, 0.0, -5.0]));
+    assert_eq!(m.mode(), Mode::Offboard);
+}
+
+#[test]
+fn ardupilot_position_target_during_takeoff_cancels_it() {
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::ArduPilot), 0.0);
+    set_mode(&mut m, 0.0, Mode::Guided);
+    arm(&mut m, 0.0);
+    let r = ack_of(&m.handle(
+        0.0,
+        &GCS,
+        &cmd(
+            MavCmd::MAV_CMD_NAV_TAKEOFF,
+            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0],
+        ),
+    ));
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    let t = stream(&mut m, 0.0, 1.0, None);
+    m.handle(t, &GCS, &setpoint([10.0, 0.0, -10.0]));
+    assert_eq!(m.take_events(), vec![MockEvent::TakeoffCancelled]);
+    stream(&mut m, t, t + 10.0, None);
+    assert!(m.position_ned_m()[2] > -0.1, "back on the ground");
+}
+
+#[test]
+fn ardupilot_takeoff_then_guided_targets() {
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::ArduPilot), 0.0);
+    // Targets are ignored outside GUIDED.
+    m.handle(0.0, &GCS, &setpoint([10.0, 0.0, -10.0]));
+    set_mode(&mut m, 0.0, Mode::Guided);
+    arm(&mut m, 0.0);
+    m.handle(
+        0.0,
+        &GCS,
+        &cmd(
+            MavCmd::MAV_CMD_NAV_TAKEOFF,
+            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0],
+        ),
+    );
+    let t = stream(&mut m, 0.0, 8.0, None);
+    assert!(m.position_ned_m()[2] < -9.5);
+    stream(&mut m, t, t + 12.0, Some([10.0, -5.0, -10.0]));
+    let p = m.position_ned_m();
+    assert!(
+        (p[0] - 10.0).abs() < 0.3 && (p[1] + 5.0).abs() < 0.3,
+        "{p:?}"
+    );
+}
+
+#[test]
+fn ardupilot_gcs_failsafe_counts_only_gcs_heartbeats() {
+    let mut cfg = MockConfig::new(Flavor::ArduPilot);
+    cfg.param_overrides = vec![("FS_GCS_ENABLE".into(), 1.0)];
+    let mut m = MockAutopilot::new(cfg, 0.0);
+    set_mode(&mut m, 0.0, Mode::Guided);
+    arm(&mut m, 0.0);
+    let hb = m.heartbeat();
+    let companion = MavHeader {
+        system_id: 1,
+        component_id: 191,
+        sequence: 0,
+    };
+    let mut t = 0.0;
+    while t < 4.0 {
+        t += 0.5;
+        m.handle(t, &GCS, &hb);
+        m.handle(t, &companion, &hb);
+        m.tick(t);
+    }
+    assert_eq!(m.mode(), Mode::Guided);
+    // Only the companion's heartbeats from now on: they do not count.
+    while t < 10.0 {
+        t += 0.5;
+        m.handle(t, &companion, &hb);
+        m.tick(t);
+    }
+    // RTL; already over home on the ground, so it lands at once.
+    let events = m.take_events();
+    assert!(
+        matches!(
+            events.as_slice(),
+            [MockEvent::Failsafe {
+                mode: Mode::ReturnToLaunch,
+                ..
+            }]
+        ),
+        "{events:?}"
+    );
+    assert!(matches!(m.mode(), Mode::ReturnToLaunch | Mode::Land));
+}
+
+#[test]
+fn set_message_interval_changes_the_stream() {
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::ArduPilot), 0.0);
+    let count = |m: &mut MockAutopilot, t0: f64| {
+        let mut n = 0;
+        let mut t = t0;
+        for _ in 0..100 {
+            t += 0.01;
+            n += m
+                .tick(t)
+                .iter()
+                .filter(|x| matches!(x, MavMessage::LOCAL_POSITION_NED(_)))
+                .count();
+        }
+        n
+    };
+    assert_eq!(
+        count(&mut m, 0.0),
+        0,
+        "ArduPilot streams nothing but HEARTBEAT until asked"
+    );
+    let r = ack_of(&m.handle(
+        1.0,
+        &GCS,
+        &cmd(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            [32.0, 50_000.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        ),
+    ));
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    let n = count(&mut m, 1.0);
+    assert!((19..=21).contains(&n), "20 Hz for 1 s: {n}");
+}
+
+#[test]
+fn parameters_travel_with_each_firmwares_encoding() {
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::Px4), 0.0);
+    let set = MavMessage::PARAM_SET(PARAM_SET_DATA {
+        param_value: encode_wire(Flavor::Px4, ParamType::Int32, 5.0),
+        target_system: 1,
+        target_component: 1,
+        param_id: "COM_OBL_RC_ACT".into(),
+        param_type: MavParamType::MAV_PARAM_TYPE_INT32,
+    });
+    let out = m.handle(0.0, &GCS, &set);
+    let MavMessage::PARAM_VALUE(v) = &out[0] else {
+        panic!("{out:?}")
+    };
+    assert_eq!(v.param_value.to_bits(), 5);
+    assert_eq!(m.params().get("COM_OBL_RC_ACT", -1.0), 5.0);
+    let list = m.handle(
+        0.0,
+        &GCS,
+        &MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 1,
+        }),
+    );
+    assert_eq!(list.len(), m.params().len());
+    let MavMessage::PARAM_VALUE(first) = &list[0] else {
+        panic!()
+    };
+    assert_eq!(param_id_str(&first.param_id), "_HASH_CHECK");
+
+    let mut a = MockAutopilot::new(MockConfig::new(Flavor::ArduPilot), 0.0);
+    let read = MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+        param_index: -1,
+        target_system: 1,
+        target_component: 1,
+        param_id: "WPNAV_SPEED".into(),
+    });
+    let out = a.handle(0.0, &GCS, &read);
+    let MavMessage::PARAM_VALUE(v) = &out[0] else {
+        panic!()
+    };
+    assert_eq!((v.param_value, v.param_index), (1000.0, u16::MAX));
+}

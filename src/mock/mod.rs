@@ -1,0 +1,8 @@
+//! A SITL-free mock autopilot, PX4 and ArduPilot flavours, that speaks real MAVLink: the
+//! behaviour (`autopilot.rs`, pure) and the transport shell (`server.rs`).
+
+pub mod autopilot;
+pub mod params;
+pub mod vehicle;
+
+pub use autopilot::{MockAutopilot, MockConfig, MockEvent};
