@@ -2,5 +2,6 @@
 //! the vehicle link.
 
 pub mod frames;
+pub mod link;
 pub mod modes;
 pub mod params_file;

@@ -419,7 +419,6 @@ impl MockAutopilot {
                     MAV_RESULT_TEMPORARILY_REJECTED
                 } else {
                     self.offboard_lost = false;
-                    self.gcs_failsafe = false;
                     self.set_mode_internal(mode);
                     MAV_RESULT_ACCEPTED
                 }

@@ -3,6 +3,7 @@
 
 pub mod autopilot;
 pub mod params;
+pub mod server;
 pub mod vehicle;
 
 pub use autopilot::{MockAutopilot, MockConfig, MockEvent};

@@ -1,0 +1,861 @@
+//! The vehicle link: MAVLink 2 to a PX4 or ArduPilot autopilot, on tokio.
+//!
+//! One connection shared by three tasks: a reader that keeps the vehicle's state current and
+//! publishes events (acks, parameter values, status texts, mode changes), a 1 Hz HEARTBEAT
+//! as MAV_TYPE_ONBOARD_CONTROLLER, and (once tracking starts) a setpoint streamer that sends
+//! SET_POSITION_TARGET_LOCAL_NED at >= 10 Hz. Commands wait for their COMMAND_ACK with a
+//! timeout and retries; a vehicle that never answers is an error, not a hang.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use mavlink::dialects::ardupilotmega::*;
+use mavlink::{AsyncMavConnection, MavHeader, MavlinkVersion};
+use thiserror::Error;
+use tokio::sync::broadcast;
+use tokio::task::JoinHandle;
+
+use super::frames::{yaw_enu_to_ned, PositionEnu, PositionNed};
+use super::modes::{Flavor, Mode};
+use super::params_file::{decode_wire, encode_wire, ParamType};
+use crate::mock::autopilot::{mav_param_type_of, param_type_of};
+use crate::world::geometry::BoundsEnu;
+
+/// Why a link operation failed.
+#[derive(Debug, Error)]
+pub enum LinkError {
+    /// The connection URL is malformed or could not be opened.
+    #[error("cannot open MAVLink connection `{url}`: {message}")]
+    Connect {
+        /// The URL.
+        url: String,
+        /// Why.
+        message: String,
+    },
+    /// No HEARTBEAT from an autopilot in time.
+    #[error("no autopilot heartbeat on `{url}` within {seconds} s")]
+    NoVehicle {
+        /// The URL.
+        url: String,
+        /// How long we waited.
+        seconds: f64,
+    },
+    /// A command was never acknowledged.
+    #[error("{command:?}: no COMMAND_ACK after {attempts} attempts")]
+    NoAck {
+        /// The command.
+        command: MavCmd,
+        /// Attempts made.
+        attempts: u32,
+    },
+    /// The vehicle refused a command.
+    #[error("{command:?} refused by the vehicle: {result:?}")]
+    Refused {
+        /// The command.
+        command: MavCmd,
+        /// The vehicle's answer.
+        result: MavResult,
+    },
+    /// The firmware has no such mode.
+    #[error("{flavor} has no mode {mode:?}")]
+    NoSuchMode {
+        /// The firmware.
+        flavor: Flavor,
+        /// The mode.
+        mode: Mode,
+    },
+    /// Something did not happen in time.
+    #[error("timed out after {seconds} s waiting for {what}")]
+    Timeout {
+        /// What.
+        what: String,
+        /// How long.
+        seconds: f64,
+    },
+    /// A parameter is not on the vehicle.
+    #[error("the vehicle has no parameter {0}")]
+    NoSuchParam(String),
+    /// A setpoint outside the geofence was asked for.
+    #[error("setpoint ({x:.2}, {y:.2}) m ENU is outside the geofence")]
+    OutsideGeofence {
+        /// East, m.
+        x: f64,
+        /// North, m.
+        y: f64,
+    },
+    /// Sending failed.
+    #[error("MAVLink send failed: {0}")]
+    Send(String),
+}
+
+/// Link settings.
+#[derive(Debug, Clone)]
+pub struct LinkConfig {
+    /// `udpin:HOST:PORT`, `udpout:HOST:PORT`, `tcpin:`, `tcpout:`, `serial:PATH:BAUD`.
+    pub url: String,
+    /// Own system id.
+    pub system_id: u8,
+    /// Own component id (191: MAV_COMP_ID_ONBOARD_COMPUTER).
+    pub component_id: u8,
+    /// How long one command attempt waits for its ACK.
+    pub ack_timeout: Duration,
+    /// Attempts per command.
+    pub attempts: u32,
+    /// Setpoint rate, Hz (PX4 needs > 2; use >= 10).
+    pub setpoint_hz: f64,
+    /// Where setpoints may go, world ENU (the geofence).
+    pub geofence_enu: Option<BoundsEnu>,
+}
+
+impl LinkConfig {
+    /// Defaults for `url`: system 1, component 191, 0.5 s ACK timeout, 5 attempts, 20 Hz.
+    pub fn new(url: &str) -> Self {
+        Self {
+            url: url.to_string(),
+            system_id: 1,
+            component_id: 191,
+            ack_timeout: Duration::from_millis(500),
+            attempts: 5,
+            setpoint_hz: 20.0,
+            geofence_enu: None,
+        }
+    }
+}
+
+/// Checks a connection URL before handing it to the transport, for a clear error.
+pub fn check_url(url: &str) -> Result<(), String> {
+    let (scheme, rest) = url.split_once(':').ok_or_else(|| {
+        "expected SCHEME:ADDRESS, e.g. udpin:0.0.0.0:14540 or serial:/dev/ttyAMA0:921600"
+            .to_string()
+    })?;
+    let (a, b) = rest
+        .rsplit_once(':')
+        .ok_or_else(|| format!("`{rest}` needs a final `:PORT` (or `:BAUD` for serial)"))?;
+    match scheme {
+        "udpin" | "udpout" | "tcpin" | "tcpout" | "udpbcast" => {
+            b.parse::<u16>()
+                .map_err(|_| format!("port `{b}` is not a number 0-65535"))?;
+            if a.is_empty() {
+                return Err("missing host".into());
+            }
+        }
+        "serial" => {
+            b.parse::<u32>()
+                .map_err(|_| format!("baud rate `{b}` is not a number"))?;
+            if a.is_empty() {
+                return Err("missing serial device path".into());
+            }
+        }
+        other => {
+            return Err(format!(
+                "unknown scheme `{other}` (udpin, udpout, tcpin, tcpout, serial)"
+            ))
+        }
+    }
+    Ok(())
+}
+
+/// What the link saw, for waiters.
+#[derive(Debug, Clone)]
+pub enum LinkEvent {
+    /// A COMMAND_ACK addressed to us (or to everyone).
+    Ack {
+        /// The command.
+        command: MavCmd,
+        /// The result.
+        result: MavResult,
+    },
+    /// A PARAM_VALUE.
+    Param {
+        /// Name.
+        name: String,
+        /// Raw float as sent.
+        wire: f32,
+        /// Type.
+        ty: Option<ParamType>,
+        /// Index (65535 for an ArduPilot read by name).
+        index: u16,
+        /// Count.
+        count: u16,
+    },
+    /// A STATUSTEXT.
+    Text(String),
+    /// The vehicle changed mode; `commanded` is false when we did not ask for it (a
+    /// failsafe, the pilot).
+    ModeChanged {
+        /// Old mode.
+        from: Mode,
+        /// New mode.
+        to: Mode,
+        /// Whether this link asked for it.
+        commanded: bool,
+    },
+}
+
+/// The vehicle as the link last saw it.
+#[derive(Debug, Clone, Default)]
+pub struct VehicleState {
+    /// Firmware, from its heartbeat.
+    pub flavor: Option<Flavor>,
+    /// Its system and component id.
+    pub address: Option<(u8, u8)>,
+    /// Time of its last heartbeat.
+    pub last_heartbeat: Option<Instant>,
+    /// Mode.
+    pub mode: Option<Mode>,
+    /// Armed.
+    pub armed: bool,
+    /// LOCAL_POSITION_NED (position, velocity) and when it arrived.
+    pub local_ned: Option<(Instant, PositionNed, [f32; 3])>,
+    /// ATTITUDE roll, pitch, yaw (NED), rad, and when.
+    pub attitude: Option<(Instant, [f32; 3])>,
+    /// GLOBAL_POSITION_INT lat, lon (deg), relative altitude (m), and when.
+    pub global: Option<(Instant, f64, f64, f64)>,
+    /// EXTENDED_SYS_STATE landed state and when.
+    pub landed: Option<(Instant, MavLandedState)>,
+    /// SYS_STATUS battery voltage (V) and when.
+    pub battery_v: Option<(Instant, f64)>,
+    /// Mode changes the link did not ask for (failsafes), newest last.
+    pub unexpected_mode_changes: Vec<(Mode, Mode)>,
+    /// The mode the link last asked for.
+    pub commanded_mode: Option<Mode>,
+}
+
+struct Streamer {
+    target_ned: Mutex<Option<(PositionNed, f32)>>,
+    paused: AtomicBool,
+}
+
+/// A running link to one vehicle.
+pub struct VehicleLink {
+    cfg: LinkConfig,
+    conn: Arc<mavlink::AsyncConnection<MavMessage>>,
+    state: Arc<Mutex<VehicleState>>,
+    events: broadcast::Sender<LinkEvent>,
+    heartbeat_paused: Arc<AtomicBool>,
+    streamer: Arc<Streamer>,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl Drop for VehicleLink {
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+impl VehicleLink {
+    /// Opens the connection and starts the reader, heartbeat and (idle) setpoint tasks.
+    pub async fn connect(cfg: LinkConfig) -> Result<Self, LinkError> {
+        check_url(&cfg.url).map_err(|message| LinkError::Connect {
+            url: cfg.url.clone(),
+            message,
+        })?;
+        let mut conn = mavlink::connect_async::<MavMessage>(&cfg.url)
+            .await
+            .map_err(|e| LinkError::Connect {
+                url: cfg.url.clone(),
+                message: e.to_string(),
+            })?;
+        conn.set_protocol_version(MavlinkVersion::V2);
+        conn.set_allow_recv_any_version(true);
+        let conn = Arc::new(conn);
+        let state = Arc::new(Mutex::new(VehicleState::default()));
+        let (events, _) = broadcast::channel(1024);
+        let header = MavHeader {
+            system_id: cfg.system_id as u32,
+            component_id: cfg.component_id,
+            sequence: 0,
+        };
+        let heartbeat_paused = Arc::new(AtomicBool::new(false));
+        let streamer = Arc::new(Streamer {
+            target_ned: Mutex::new(None),
+            paused: AtomicBool::new(false),
+        });
+
+        let reader = {
+            let conn = conn.clone();
+            let state = state.clone();
+            let events = events.clone();
+            let me = (cfg.system_id, cfg.component_id);
+            tokio::spawn(async move {
+                loop {
+                    match conn.recv().await {
+                        Ok((h, m)) => on_message(&state, &events, me, &h, &m),
+                        Err(e) => {
+                            tracing::debug!("link: receive error: {e}");
+                            tokio::time::sleep(Duration::from_millis(5)).await;
+                        }
+                    }
+                }
+            })
+        };
+        let heartbeat = {
+            let conn = conn.clone();
+            let paused = heartbeat_paused.clone();
+            tokio::spawn(async move {
+                let mut t = tokio::time::interval(Duration::from_secs(1));
+                loop {
+                    t.tick().await;
+                    if paused.load(Ordering::Relaxed) {
+                        continue;
+                    }
+                    let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                        custom_mode: 0,
+                        mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                        base_mode: MavModeFlag::empty(),
+                        system_status: MavState::MAV_STATE_ACTIVE,
+                        mavlink_version: 3,
+                    });
+                    let _ = conn.send(&header, &hb).await;
+                }
+            })
+        };
+        let stream = {
+            let conn = conn.clone();
+            let streamer = streamer.clone();
+            let state = state.clone();
+            let period = Duration::from_secs_f64(1.0 / cfg.setpoint_hz.max(1.0));
+            tokio::spawn(async move {
+                let mut t = tokio::time::interval(period);
+                t.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+                let start = Instant::now();
+                loop {
+                    t.tick().await;
+                    if streamer.paused.load(Ordering::Relaxed) {
+                        continue;
+                    }
+                    let Some((p, yaw)) = *streamer.target_ned.lock().expect("streamer poisoned")
+                    else {
+                        continue;
+                    };
+                    let target = state
+                        .lock()
+                        .expect("state poisoned")
+                        .address
+                        .unwrap_or((1, 1));
+                    let m = position_target(target, p, yaw, start.elapsed().as_millis() as u32);
+                    let _ = conn.send(&header, &m).await;
+                }
+            })
+        };
+        Ok(Self {
+            cfg,
+            conn,
+            state,
+            events,
+            heartbeat_paused,
+            streamer,
+            tasks: vec![reader, heartbeat, stream],
+        })
+    }
+
+    fn header(&self) -> MavHeader {
+        MavHeader {
+            system_id: self.cfg.system_id as u32,
+            component_id: self.cfg.component_id,
+            sequence: 0,
+        }
+    }
+
+    /// A copy of the vehicle state.
+    pub fn state(&self) -> VehicleState {
+        self.state.lock().expect("state poisoned").clone()
+    }
+
+    /// Subscribes to link events.
+    pub fn events(&self) -> broadcast::Receiver<LinkEvent> {
+        self.events.subscribe()
+    }
+
+    /// Waits for an autopilot's heartbeat; returns its flavour.
+    pub async fn wait_vehicle(&self, timeout: Duration) -> Result<Flavor, LinkError> {
+        let until = Instant::now() + timeout;
+        loop {
+            if let Some(f) = self.state().flavor {
+                return Ok(f);
+            }
+            if Instant::now() > until {
+                return Err(LinkError::NoVehicle {
+                    url: self.cfg.url.clone(),
+                    seconds: timeout.as_secs_f64(),
+                });
+            }
+            // udpout/tcpout peers learn our address from what we send.
+            self.send(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                mavlink_version: 3,
+                ..Default::default()
+            }))
+            .await
+            .ok();
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
+    fn flavor(&self) -> Flavor {
+        self.state().flavor.unwrap_or(Flavor::Px4)
+    }
+
+    fn target(&self) -> (u8, u8) {
+        self.state().address.unwrap_or((1, 1))
+    }
+
+    async fn send(&self, m: &MavMessage) -> Result<(), LinkError> {
+        self.conn
+            .send(&self.header(), m)
+            .await
+            .map(|_| ())
+            .map_err(|e| LinkError::Send(e.to_string()))
+    }
+
+    /// COMMAND_LONG with retries; Ok only for MAV_RESULT_ACCEPTED.
+    pub async fn command(&self, command: MavCmd, p: [f32; 7]) -> Result<(), LinkError> {
+        let (ts, tc) = self.target();
+        let mut rx = self.events.subscribe();
+        for attempt in 0..self.cfg.attempts {
+            let m = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                param1: p[0],
+                param2: p[1],
+                param3: p[2],
+                param4: p[3],
+                param5: p[4],
+                param6: p[5],
+                param7: p[6],
+                command,
+                target_system: ts,
+                target_component: tc,
+                confirmation: attempt.min(255) as u8,
+            });
+            self.send(&m).await?;
+            let until = tokio::time::Instant::now() + self.cfg.ack_timeout;
+            loop {
+                match tokio::time::timeout_at(until, rx.recv()).await {
+                    Ok(Ok(LinkEvent::Ack { command: c, result })) if c == command => {
+                        return match result {
+                            MavResult::MAV_RESULT_ACCEPTED => Ok(()),
+                            MavResult::MAV_RESULT_IN_PROGRESS => continue,
+                            r => Err(LinkError::Refused { command, result: r }),
+                        };
+                    }
+                    Ok(Ok(_)) | Ok(Err(broadcast::error::RecvError::Lagged(_))) => continue,
+                    Ok(Err(broadcast::error::RecvError::Closed)) | Err(_) => break,
+                }
+            }
+        }
+        Err(LinkError::NoAck {
+            command,
+            attempts: self.cfg.attempts,
+        })
+    }
+
+    /// MAV_CMD_SET_MESSAGE_INTERVAL for message `id` at `hz`.
+    pub async fn set_message_rate(&self, id: u32, hz: f64) -> Result<(), LinkError> {
+        self.command(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            [id as f32, (1e6 / hz) as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await
+    }
+
+    /// Asks for the telemetry the tracker reads: LOCAL_POSITION_NED and ATTITUDE at 30 Hz,
+    /// GLOBAL_POSITION_INT at 10 Hz, EXTENDED_SYS_STATE and SYS_STATUS at 2 Hz.
+    pub async fn request_telemetry(&self) -> Result<(), LinkError> {
+        for (id, hz) in [(32, 30.0), (30, 30.0), (33, 10.0), (245, 2.0), (1, 2.0)] {
+            self.set_message_rate(id, hz).await?;
+        }
+        Ok(())
+    }
+
+    /// MAV_CMD_DO_SET_MODE with the firmware's encoding; waits until the heartbeat shows it.
+    pub async fn set_mode(&self, mode: Mode) -> Result<(), LinkError> {
+        let flavor = self.flavor();
+        let (p2, p3) = mode
+            .do_set_mode_params(flavor)
+            .ok_or(LinkError::NoSuchMode { flavor, mode })?;
+        self.state.lock().expect("state poisoned").commanded_mode = Some(mode);
+        self.command(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, p2, p3, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await?;
+        self.wait_for(
+            |s| s.mode == Some(mode),
+            &format!("mode {mode:?}"),
+            Duration::from_secs(3),
+        )
+        .await
+    }
+
+    /// Arms (MAV_CMD_COMPONENT_ARM_DISARM, param1 = 1) and waits for the armed heartbeat.
+    pub async fn arm(&self) -> Result<(), LinkError> {
+        self.command(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await?;
+        self.wait_for(|s| s.armed, "armed", Duration::from_secs(3))
+            .await
+    }
+
+    /// Polls the state until `pred` holds.
+    pub async fn wait_for(
+        &self,
+        pred: impl Fn(&VehicleState) -> bool,
+        what: &str,
+        timeout: Duration,
+    ) -> Result<(), LinkError> {
+        let until = Instant::now() + timeout;
+        while !pred(&self.state()) {
+            if Instant::now() > until {
+                return Err(LinkError::Timeout {
+                    what: what.to_string(),
+                    seconds: timeout.as_secs_f64(),
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        Ok(())
+    }
+
+    /// Sets the position the streamer sends (world ENU, yaw ENU), refusing points outside the
+    /// geofence. The stream starts with the first setpoint.
+    pub fn set_setpoint(&self, p: PositionEnu, yaw_enu_rad: f64) -> Result<(), LinkError> {
+        if let Some(g) = &self.cfg.geofence_enu {
+            if !g.contains(&p.xy()) {
+                return Err(LinkError::OutsideGeofence {
+                    x: p.x_east_m,
+                    y: p.y_north_m,
+                });
+            }
+        }
+        *self.streamer.target_ned.lock().expect("streamer poisoned") =
+            Some((p.to_ned(), yaw_enu_to_ned(yaw_enu_rad) as f32));
+        Ok(())
+    }
+
+    /// Pauses or resumes the setpoint stream (tests; a stalled companion).
+    pub fn pause_setpoints(&self, paused: bool) {
+        self.streamer.paused.store(paused, Ordering::Relaxed);
+    }
+
+    /// Pauses or resumes our heartbeat (tests; a stalled companion).
+    pub fn pause_heartbeat(&self, paused: bool) {
+        self.heartbeat_paused.store(paused, Ordering::Relaxed);
+    }
+
+    /// Current position, world ENU, if known.
+    pub fn position_enu(&self) -> Option<PositionEnu> {
+        self.state().local_ned.map(|(_, p, _)| p.to_enu())
+    }
+
+    /// Takes off to `altitude_m` above the origin and enters the tracking mode, as each
+    /// firmware wants it:
+    /// * PX4: stream setpoints (here, at altitude) for more than 1 s, then OFFBOARD, then arm;
+    ///   the vehicle climbs to the setpoint.
+    /// * ArduPilot: GUIDED, arm, MAV_CMD_NAV_TAKEOFF, wait for the altitude (a position
+    ///   target sent earlier would cancel the takeoff), then stream setpoints.
+    pub async fn take_off(&self, altitude_m: f64, timeout: Duration) -> Result<(), LinkError> {
+        let here = self.position_enu().unwrap_or(PositionEnu {
+            x_east_m: 0.0,
+            y_north_m: 0.0,
+            z_up_m: 0.0,
+        });
+        let above = PositionEnu {
+            z_up_m: altitude_m,
+            ..here
+        };
+        match self.flavor() {
+            Flavor::Px4 => {
+                self.set_setpoint(above, 0.0)?;
+                tokio::time::sleep(Duration::from_millis(1200)).await;
+                self.set_mode(Mode::Offboard).await?;
+                self.arm().await?;
+            }
+            Flavor::ArduPilot => {
+                self.set_mode(Mode::Guided).await?;
+                self.arm().await?;
+                self.command(
+                    MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, altitude_m as f32],
+                )
+                .await?;
+            }
+        }
+        self.wait_for(
+            |s| {
+                s.local_ned
+                    .map(|(_, p, _)| -p.z_down_m >= 0.95 * altitude_m)
+                    .unwrap_or(false)
+            },
+            &format!("altitude {altitude_m} m"),
+            timeout,
+        )
+        .await?;
+        if self.flavor() == Flavor::ArduPilot {
+            self.set_setpoint(above, 0.0)?;
+        }
+        Ok(())
+    }
+
+    /// Clean stop: hold position (PX4 AUTO.LOITER; ArduPilot LOITER, else BRAKE) and stop
+    /// streaming.
+    pub async fn hold(&self) -> Result<(), LinkError> {
+        let r = self.set_mode(Mode::Hold).await;
+        let r = match (r, self.flavor()) {
+            (Err(_), Flavor::ArduPilot) => self.set_mode(Mode::Brake).await,
+            (r, _) => r,
+        };
+        *self.streamer.target_ned.lock().expect("streamer poisoned") = None;
+        r
+    }
+
+    /// Reads one parameter by name.
+    pub async fn param_read(&self, name: &str) -> Result<(f64, ParamType), LinkError> {
+        let (ts, tc) = self.target();
+        let mut rx = self.events.subscribe();
+        for _ in 0..self.cfg.attempts {
+            self.send(&MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+                param_index: -1,
+                target_system: ts,
+                target_component: tc,
+                param_id: name.into(),
+            }))
+            .await?;
+            if let Some((v, t)) = self.wait_param(&mut rx, name).await {
+                return Ok((v, t));
+            }
+        }
+        Err(LinkError::NoSuchParam(name.to_string()))
+    }
+
+    /// Sets one parameter with the firmware's encoding and confirms the echoed value.
+    pub async fn param_set(&self, name: &str, value: f64, ty: ParamType) -> Result<f64, LinkError> {
+        let (ts, tc) = self.target();
+        let flavor = self.flavor();
+        let mut rx = self.events.subscribe();
+        for _ in 0..self.cfg.attempts {
+            self.send(&MavMessage::PARAM_SET(PARAM_SET_DATA {
+                param_value: encode_wire(flavor, ty, value),
+                target_system: ts,
+                target_component: tc,
+                param_id: name.into(),
+                param_type: mav_param_type_of(ty),
+            }))
+            .await?;
+            if let Some((v, _)) = self.wait_param(&mut rx, name).await {
+                if (v - value).abs() <= 1e-6 * value.abs().max(1.0) {
+                    return Ok(v);
+                }
+            }
+        }
+        Err(LinkError::Timeout {
+            what: format!("the vehicle to confirm {name} = {value}"),
+            seconds: self.cfg.ack_timeout.as_secs_f64() * self.cfg.attempts as f64,
+        })
+    }
+
+    async fn wait_param(
+        &self,
+        rx: &mut broadcast::Receiver<LinkEvent>,
+        name: &str,
+    ) -> Option<(f64, ParamType)> {
+        let flavor = self.flavor();
+        let until = tokio::time::Instant::now() + self.cfg.ack_timeout;
+        loop {
+            match tokio::time::timeout_at(until, rx.recv()).await {
+                Ok(Ok(LinkEvent::Param {
+                    name: n,
+                    wire,
+                    ty: Some(t),
+                    ..
+                })) if n == name => {
+                    return Some((decode_wire(flavor, t, wire), t));
+                }
+                Ok(Ok(_)) | Ok(Err(broadcast::error::RecvError::Lagged(_))) => continue,
+                _ => return None,
+            }
+        }
+    }
+}
+
+fn position_target(
+    target: (u8, u8),
+    p: PositionNed,
+    yaw_ned: f32,
+    time_boot_ms: u32,
+) -> MavMessage {
+    // Position and yaw given; velocity, acceleration and yaw rate ignored.
+    let mask = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
+        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+    MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        time_boot_ms,
+        x: p.x_north_m as f32,
+        y: p.y_east_m as f32,
+        z: p.z_down_m as f32,
+        yaw: yaw_ned,
+        type_mask: mask,
+        target_system: target.0,
+        target_component: target.1,
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..Default::default()
+    })
+}
+
+fn on_message(
+    state: &Mutex<VehicleState>,
+    events: &broadcast::Sender<LinkEvent>,
+    me: (u8, u8),
+    h: &MavHeader,
+    m: &MavMessage,
+) {
+    let now = Instant::now();
+    let mut s = state.lock().expect("state poisoned");
+    let from_vehicle = s.address.map(|a| a.0 as u32 == h.system_id).unwrap_or(true);
+    match m {
+        MavMessage::HEARTBEAT(hb) => {
+            let flavor = match hb.autopilot {
+                MavAutopilot::MAV_AUTOPILOT_PX4 => Flavor::Px4,
+                MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Flavor::ArduPilot,
+                _ => return, // a GCS, a camera, another companion
+            };
+            s.flavor = Some(flavor);
+            s.address = Some((h.system_id as u8, h.component_id));
+            s.last_heartbeat = Some(now);
+            s.armed = hb
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            let mode = Mode::from_custom_mode(flavor, hb.custom_mode);
+            if let Some(old) = s.mode {
+                if old != mode {
+                    let commanded = s.commanded_mode == Some(mode);
+                    if !commanded {
+                        tracing::warn!(
+                            "vehicle changed mode {old:?} -> {mode:?} by itself (failsafe?)"
+                        );
+                        s.unexpected_mode_changes.push((old, mode));
+                    }
+                    let _ = events.send(LinkEvent::ModeChanged {
+                        from: old,
+                        to: mode,
+                        commanded,
+                    });
+                }
+            }
+            s.mode = Some(mode);
+        }
+        _ if !from_vehicle => {}
+        MavMessage::COMMAND_ACK(a) => {
+            // ACKs addressed to someone else are not ours.
+            let ours = (a.target_system == 0 || a.target_system == me.0)
+                && (a.target_component == 0 || a.target_component == me.1);
+            if ours {
+                let _ = events.send(LinkEvent::Ack {
+                    command: a.command,
+                    result: a.result,
+                });
+            }
+        }
+        MavMessage::LOCAL_POSITION_NED(p) => {
+            s.local_ned = Some((
+                now,
+                PositionNed {
+                    x_north_m: p.x as f64,
+                    y_east_m: p.y as f64,
+                    z_down_m: p.z as f64,
+                },
+                [p.vx, p.vy, p.vz],
+            ));
+        }
+        MavMessage::ATTITUDE(a) => s.attitude = Some((now, [a.roll, a.pitch, a.yaw])),
+        MavMessage::GLOBAL_POSITION_INT(g) => {
+            s.global = Some((
+                now,
+                g.lat as f64 * 1e-7,
+                g.lon as f64 * 1e-7,
+                g.relative_alt as f64 * 1e-3,
+            ));
+        }
+        MavMessage::EXTENDED_SYS_STATE(e) => s.landed = Some((now, e.landed_state)),
+        MavMessage::SYS_STATUS(st) => s.battery_v = Some((now, st.voltage_battery as f64 * 1e-3)),
+        MavMessage::PARAM_VALUE(p) => {
+            let _ = events.send(LinkEvent::Param {
+                name: p
+                    .param_id
+                    .to_str()
+                    .unwrap_or("")
+                    .trim_end_matches('\0')
+                    .to_string(),
+                wire: p.param_value,
+                ty: param_type_of(p.param_type),
+                index: p.param_index,
+                count: p.param_count,
+            });
+        }
+        MavMessage::STATUSTEXT(t) => {
+            let text = t
+                .text
+                .to_str()
+                .unwrap_or("")
+                .trim_end_matches('\0')
+                .to_string();
+            tracing::info!("vehicle: {text}");
+            let _ = events.send(LinkEvent::Text(text));
+        }
+        _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn urls_are_checked_with_a_reason() {
+        for ok in [
+            "udpin:0.0.0.0:14540",
+            "udpout:127.0.0.1:14550",
+            "tcpout:localhost:5760",
+            "serial:/dev/ttyAMA0:921600",
+        ] {
+            assert!(check_url(ok).is_ok(), "{ok}");
+        }
+        for (bad, needle) in [
+            ("udp:1.2.3.4:5", "unknown scheme"),
+            ("udpin:0.0.0.0", "PORT"),
+            ("udpin:0.0.0.0:99999", "not a number"),
+            ("serial:/dev/ttyS0:fast", "baud"),
+            ("14550", "SCHEME"),
+        ] {
+            let e = check_url(bad).unwrap_err();
+            assert!(e.contains(needle), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn position_target_is_local_ned_with_the_position_only_mask() {
+        let p = PositionEnu {
+            x_east_m: 3.0,
+            y_north_m: 4.0,
+            z_up_m: 10.0,
+        };
+        let MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) =
+            position_target((1, 1), p.to_ned(), 0.0, 0)
+        else {
+            unreachable!()
+        };
+        assert_eq!((m.x, m.y, m.z), (4.0, 3.0, -10.0));
+        assert_eq!(m.coordinate_frame, MavFrame::MAV_FRAME_LOCAL_NED);
+        // 3576 plus the yaw bit cleared: position + yaw given.
+        assert_eq!(m.type_mask.bits(), 3576 & !1024);
+    }
+}

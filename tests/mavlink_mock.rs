@@ -1,0 +1,227 @@
+//! The vehicle link against the mock autopilot as a real peer over real UDP sockets: take
+//! off, enter offboard/guided, fly setpoints, failsafe, parameters, packet loss.
+
+use std::time::Duration;
+
+use infotrack::autopilot::frames::PositionEnu;
+use infotrack::autopilot::link::{LinkConfig, LinkEvent, VehicleLink};
+use infotrack::autopilot::modes::{Flavor, Mode};
+use infotrack::autopilot::params_file::ParamType;
+use infotrack::mock::server::{spawn, Faults};
+use infotrack::mock::{MockConfig, MockEvent};
+
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+async fn setup(
+    flavor: Flavor,
+    loss_percent: f64,
+    link_sysid: u8,
+) -> (infotrack::mock::server::MockHandle, VehicleLink) {
+    let port = free_udp_port();
+    let mock = spawn(
+        &format!("udpin:127.0.0.1:{port}"),
+        MockConfig::new(flavor),
+        Faults {
+            loss_percent,
+            seed: 7,
+        },
+    )
+    .await
+    .unwrap();
+    let mut cfg = LinkConfig::new(&format!("udpout:127.0.0.1:{port}"));
+    cfg.system_id = link_sysid;
+    cfg.ack_timeout = Duration::from_millis(300);
+    cfg.attempts = 10;
+    let link = VehicleLink::connect(cfg).await.unwrap();
+    assert_eq!(
+        link.wait_vehicle(Duration::from_secs(5)).await.unwrap(),
+        flavor
+    );
+    (mock, link)
+}
+
+async fn fly_to(link: &VehicleLink, x: f64, y: f64, alt: f64) {
+    let p = PositionEnu {
+        x_east_m: x,
+        y_north_m: y,
+        z_up_m: alt,
+    };
+    link.set_setpoint(p, 0.0).unwrap();
+    link.wait_for(
+        |s| {
+            s.local_ned
+                .map(|(_, n, _)| {
+                    let e = n.to_enu();
+                    (e.x_east_m - x).hypot(e.y_north_m - y) < 0.5 && (e.z_up_m - alt).abs() < 0.5
+                })
+                .unwrap_or(false)
+        },
+        &format!("reaching ({x}, {y}, {alt})"),
+        Duration::from_secs(20),
+    )
+    .await
+    .unwrap();
+}
+
+async fn expect_failsafe(
+    link: &VehicleLink,
+    rx: &mut tokio::sync::broadcast::Receiver<LinkEvent>,
+    want: Mode,
+) {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(15);
+    loop {
+        match tokio::time::timeout_at(deadline, rx.recv()).await {
+            Ok(Ok(LinkEvent::ModeChanged {
+                to,
+                commanded: false,
+                ..
+            })) if to == want => break,
+            Ok(Ok(_)) | Ok(Err(_)) => continue,
+            Err(_) => panic!("no failsafe to {want:?}; state {:?}", link.state().mode),
+        }
+    }
+    assert!(link
+        .state()
+        .unexpected_mode_changes
+        .iter()
+        .any(|(_, to)| *to == want));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn px4_offboard_flight_failsafe_and_hold() {
+    let (mock, link) = setup(Flavor::Px4, 0.0, 1).await;
+    link.request_telemetry().await.unwrap();
+    // The failsafe action: hold (5), an INT32 sent bytewise.
+    link.param_set("COM_OBL_RC_ACT", 5.0, ParamType::Int32)
+        .await
+        .unwrap();
+    assert_eq!(
+        link.param_read("COM_OBL_RC_ACT").await.unwrap(),
+        (5.0, ParamType::Int32)
+    );
+    assert_eq!(mock.with(|m| m.params().get("COM_OBL_RC_ACT", -1.0)), 5.0);
+
+    link.take_off(5.0, Duration::from_secs(15)).await.unwrap();
+    assert_eq!(link.state().mode, Some(Mode::Offboard));
+    for (x, y) in [(10.0, 0.0), (10.0, 10.0), (-5.0, 5.0)] {
+        fly_to(&link, x, y, 5.0).await;
+    }
+    // ENU east 10 is NED y = 10 on the vehicle's side: the frames agree end to end.
+    let mut rx = link.events();
+    link.pause_setpoints(true);
+    expect_failsafe(&link, &mut rx, Mode::Hold).await;
+    assert!(mock.take_events().iter().any(|e| matches!(
+        e,
+        MockEvent::Failsafe {
+            mode: Mode::Hold,
+            ..
+        }
+    )));
+    // Setpoints resume: PX4 returns to OFFBOARD by itself; then a clean stop holds.
+    link.pause_setpoints(false);
+    link.wait_for(
+        |s| s.mode == Some(Mode::Offboard),
+        "offboard again",
+        Duration::from_secs(5),
+    )
+    .await
+    .unwrap();
+    link.hold().await.unwrap();
+    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ardupilot_guided_flight_and_gcs_failsafe() {
+    // As the GCS (system 255): its heartbeats are the ones ArduPilot's GCS failsafe counts.
+    let (mock, link) = setup(Flavor::ArduPilot, 0.0, 255).await;
+    link.request_telemetry().await.unwrap();
+    link.param_set("FS_GCS_ENABLE", 1.0, ParamType::Int8)
+        .await
+        .unwrap();
+    link.param_set("FS_GCS_TIMEOUT", 2.0, ParamType::Real32)
+        .await
+        .unwrap();
+    link.take_off(5.0, Duration::from_secs(15)).await.unwrap();
+    assert_eq!(link.state().mode, Some(Mode::Guided));
+    assert!(
+        mock.take_events().is_empty(),
+        "the takeoff was not cancelled"
+    );
+    for (x, y) in [(8.0, 0.0), (8.0, 8.0), (0.0, 4.0)] {
+        fly_to(&link, x, y, 5.0).await;
+    }
+    let mut rx = link.events();
+    link.pause_setpoints(true);
+    link.pause_heartbeat(true);
+    expect_failsafe(&link, &mut rx, Mode::ReturnToLaunch).await;
+    link.pause_heartbeat(false);
+    link.hold().await.unwrap();
+    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn thirty_percent_packet_loss_still_completes_the_sequence() {
+    for flavor in [Flavor::Px4, Flavor::ArduPilot] {
+        let (_mock, link) = setup(flavor, 30.0, 1).await;
+        link.request_telemetry().await.unwrap();
+        link.take_off(4.0, Duration::from_secs(20)).await.unwrap();
+        fly_to(&link, 6.0, -3.0, 4.0).await;
+        link.hold().await.unwrap();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_vehicle_that_never_answers_is_a_timeout_not_a_hang() {
+    let port = free_udp_port();
+    let link = VehicleLink::connect(LinkConfig::new(&format!("udpout:127.0.0.1:{port}")))
+        .await
+        .unwrap();
+    let err = link
+        .wait_vehicle(Duration::from_millis(600))
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("no autopilot heartbeat"), "{err}");
+    let err = VehicleLink::connect(LinkConfig::new("udp:nowhere:14550"))
+        .await
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("unknown scheme"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn setpoints_outside_the_geofence_are_refused() {
+    let port = free_udp_port();
+    let mut cfg = LinkConfig::new(&format!("udpout:127.0.0.1:{port}"));
+    cfg.geofence_enu = Some(infotrack::world::geometry::BoundsEnu {
+        x_min_m: -10.0,
+        x_max_m: 10.0,
+        y_min_m: -10.0,
+        y_max_m: 10.0,
+    });
+    let link = VehicleLink::connect(cfg).await.unwrap();
+    let p = PositionEnu {
+        x_east_m: 11.0,
+        y_north_m: 0.0,
+        z_up_m: 5.0,
+    };
+    assert!(link.set_setpoint(p, 0.0).is_err());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unknown_parameters_are_reported() {
+    let (_mock, link) = setup(Flavor::Px4, 0.0, 1).await;
+    let err = link
+        .param_read("NO_SUCH_PARAM")
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("NO_SUCH_PARAM"), "{err}");
+}
