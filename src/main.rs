@@ -35,6 +35,47 @@ enum Command {
     /// Record noisy target positions from the simulated scenario, as a flight-log CSV, to
     /// train a motion model on (training/train_dmmn.py).
     Dataset(DatasetArgs),
+    /// Run the SITL-free mock autopilot (PX4 or ArduPilot flavour) on a MAVLink transport
+    /// until interrupted.
+    MockAutopilot(MockArgs),
+    /// Compare a parameter file with a vehicle (`check`) or write it (`apply`).
+    Params(ParamsArgs),
+}
+
+#[derive(clap::Args)]
+struct MockArgs {
+    /// px4 or ardupilot.
+    #[arg(long)]
+    flavor: String,
+    /// Where to listen or connect: udpin:HOST:PORT, tcpin:HOST:PORT, serial:PATH:BAUD, ...
+    #[arg(long, default_value = "udpin:127.0.0.1:14550")]
+    listen: String,
+    /// Start from the flavour's defaults with this parameter file applied.
+    #[arg(long)]
+    params: Option<PathBuf>,
+    /// Drop this share of messages in both directions, percent.
+    #[arg(long, default_value_t = 0.0)]
+    loss: f64,
+    /// Seed of the fault draws.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Seconds after start before arming is allowed (the estimator settling).
+    #[arg(long, default_value_t = 0.0)]
+    estimator_ready_after: f64,
+}
+
+#[derive(clap::Args)]
+struct ParamsArgs {
+    /// check or apply.
+    action: String,
+    /// A QGroundControl .params or Mission Planner .parm/.param file.
+    file: PathBuf,
+    /// The vehicle: udpout:HOST:PORT, udpin:HOST:PORT, tcpout:..., serial:PATH:BAUD.
+    #[arg(long)]
+    connect: String,
+    /// Seconds to wait for the vehicle's heartbeat.
+    #[arg(long, default_value_t = 10.0)]
+    timeout: f64,
 }
 
 #[derive(clap::Args)]
@@ -120,6 +161,8 @@ fn main() -> ExitCode {
         Command::Sim(a) => sim(a),
         Command::Bench(a) => bench(a),
         Command::Dataset(a) => dataset(a),
+        Command::MockAutopilot(a) => mock_autopilot(a),
+        Command::Params(a) => params(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -242,5 +285,100 @@ fn dataset(a: DatasetArgs) -> Result<()> {
         cfg.name,
         a.out.display()
     );
+    Ok(())
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}
+
+fn mock_autopilot(a: MockArgs) -> Result<()> {
+    use infotrack::mock::{server, MockConfig};
+    let flavor: infotrack::autopilot::modes::Flavor =
+        a.flavor.parse().map_err(anyhow::Error::msg)?;
+    infotrack::autopilot::link::check_url(&a.listen)
+        .map_err(|e| anyhow::anyhow!("--listen `{}`: {e}", a.listen))?;
+    if !(0.0..=100.0).contains(&a.loss) {
+        bail!("--loss must be a percentage 0-100, got {}", a.loss);
+    }
+    let mut cfg = MockConfig::new(flavor);
+    cfg.estimator_ready_after_s = a.estimator_ready_after;
+    if let Some(path) = &a.params {
+        let table = infotrack::mock::params::ParamTable::defaults(flavor);
+        for p in infotrack::autopilot::params_file::read(path)? {
+            if table.by_name(&p.name).is_none() {
+                bail!(
+                    "{}:{}: the {flavor} mock has no parameter {}",
+                    path.display(),
+                    p.line,
+                    p.name
+                );
+            }
+            cfg.param_overrides.push((p.name, p.value));
+        }
+    }
+    runtime()?.block_on(async move {
+        let _mock = server::spawn(
+            &a.listen,
+            cfg,
+            server::Faults {
+                loss_percent: a.loss,
+                seed: a.seed,
+            },
+        )
+        .await
+        .with_context(|| format!("cannot open {}", a.listen))?;
+        eprintln!("mock {flavor} autopilot on {} (Ctrl-C to stop)", a.listen);
+        wait_for_signal().await;
+        Ok(())
+    })
+}
+
+async fn wait_for_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        let mut term = signal(SignalKind::terminate()).expect("SIGTERM handler");
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+fn params(a: ParamsArgs) -> Result<()> {
+    use infotrack::autopilot::{link, params_file, params_sync};
+    let apply = match a.action.as_str() {
+        "check" => false,
+        "apply" => true,
+        other => bail!("unknown params action `{other}` (check or apply)"),
+    };
+    let file = params_file::read(&a.file)?;
+    let ok = runtime()?.block_on(async move {
+        let l = link::VehicleLink::connect(link::LinkConfig::new(&a.connect)).await?;
+        l.wait_vehicle(std::time::Duration::from_secs_f64(a.timeout))
+            .await?;
+        let rows = if apply {
+            params_sync::apply(&l, &file).await
+        } else {
+            params_sync::check(&l, &file).await
+        };
+        print!("{}", params_sync::render(&rows));
+        Ok::<bool, anyhow::Error>(params_sync::all_ok(&rows))
+    })?;
+    if !ok {
+        bail!(
+            "{}: the vehicle does not match the file (see the table)",
+            a.file.display()
+        );
+    }
     Ok(())
 }

@@ -5,3 +5,4 @@ pub mod frames;
 pub mod link;
 pub mod modes;
 pub mod params_file;
+pub mod params_sync;

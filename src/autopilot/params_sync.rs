@@ -1,0 +1,126 @@
+//! `infotrack params check|apply`: compare a parameter file with a vehicle, or write it.
+
+use std::fmt::Write;
+
+use super::link::{LinkError, VehicleLink};
+use super::params_file::FileParam;
+
+/// One row of the report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamRow {
+    /// Name.
+    pub name: String,
+    /// Line in the file.
+    pub line: usize,
+    /// Value in the file.
+    pub file_value: f64,
+    /// Value on the vehicle (after apply: the confirmed value), if it has the parameter.
+    pub vehicle_value: Option<f64>,
+    /// Outcome.
+    pub status: ParamStatus,
+}
+
+/// How a parameter compares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamStatus {
+    /// Same value.
+    Match,
+    /// Different value.
+    Mismatch,
+    /// The vehicle has no such parameter.
+    Missing,
+    /// Written and confirmed.
+    Applied,
+    /// Writing failed.
+    Failed,
+}
+
+fn same(a: f64, b: f64) -> bool {
+    // Values travel as f32.
+    (a - b).abs() <= 1e-6 * a.abs().max(b.abs()).max(1.0)
+}
+
+/// Reads every parameter of the file from the vehicle.
+pub async fn check(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
+    let mut rows = Vec::new();
+    for p in params {
+        let (vehicle_value, status) = match link.param_read(&p.name).await {
+            Ok((v, _)) if same(v, p.value) => (Some(v), ParamStatus::Match),
+            Ok((v, _)) => (Some(v), ParamStatus::Mismatch),
+            Err(_) => (None, ParamStatus::Missing),
+        };
+        rows.push(ParamRow {
+            name: p.name.clone(),
+            line: p.line,
+            file_value: p.value,
+            vehicle_value,
+            status,
+        });
+    }
+    rows
+}
+
+/// Writes every parameter of the file, with the type the vehicle reports for it.
+pub async fn apply(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
+    let mut rows = Vec::new();
+    for p in params {
+        let row = match link.param_read(&p.name).await {
+            Err(_) => (None, ParamStatus::Missing),
+            Ok((_, ty)) => {
+                if let Some(file_ty) = p.ty.filter(|t| *t != ty) {
+                    tracing::warn!("{}: the file says type {file_ty:?}, the vehicle {ty:?}; using the vehicle's", p.name);
+                }
+                match link.param_set(&p.name, p.value, ty).await {
+                    Ok(v) => (Some(v), ParamStatus::Applied),
+                    Err(LinkError::Timeout { .. }) | Err(_) => (None, ParamStatus::Failed),
+                }
+            }
+        };
+        rows.push(ParamRow {
+            name: p.name.clone(),
+            line: p.line,
+            file_value: p.value,
+            vehicle_value: row.0,
+            status: row.1,
+        });
+    }
+    rows
+}
+
+/// Whether every row is a match or an applied value.
+pub fn all_ok(rows: &[ParamRow]) -> bool {
+    rows.iter()
+        .all(|r| matches!(r.status, ParamStatus::Match | ParamStatus::Applied))
+}
+
+/// The report as a table.
+pub fn render(rows: &[ParamRow]) -> String {
+    let mut s = format!(
+        "{:<17} {:>5} {:>14} {:>14}  {}\n",
+        "parameter", "line", "file", "vehicle", "status"
+    );
+    for r in rows {
+        let v = r
+            .vehicle_value
+            .map(|v| format!("{v}"))
+            .unwrap_or_else(|| "-".into());
+        let status = match r.status {
+            ParamStatus::Match => "match",
+            ParamStatus::Mismatch => "MISMATCH",
+            ParamStatus::Missing => "NOT ON VEHICLE",
+            ParamStatus::Applied => "applied",
+            ParamStatus::Failed => "FAILED",
+        };
+        let _ = writeln!(
+            s,
+            "{:<17} {:>5} {:>14} {:>14}  {status}",
+            r.name, r.line, r.file_value, v
+        );
+    }
+    let bad = rows
+        .iter()
+        .filter(|r| !matches!(r.status, ParamStatus::Match | ParamStatus::Applied))
+        .count();
+    let _ = writeln!(s, "{} parameters, {} not as the file says", rows.len(), bad);
+    s
+}

@@ -1,0 +1,133 @@
+//! `infotrack params check|apply` against `infotrack mock-autopilot` in another process,
+//! over UDP, with the shipped parameter files of both formats.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output};
+use std::time::Duration;
+
+struct Mock(Child);
+impl Drop for Mock {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_infotrack"))
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn mock(flavor: &str) -> (Mock, u16) {
+    let port = free_udp_port();
+    let child = bin()
+        .args([
+            "mock-autopilot",
+            "--flavor",
+            flavor,
+            "--listen",
+            &format!("udpin:127.0.0.1:{port}"),
+        ])
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    (Mock(child), port)
+}
+
+fn params(action: &str, file: &Path, port: u16) -> Output {
+    bin()
+        .args(["params", action])
+        .arg(file)
+        .args([
+            "--connect",
+            &format!("udpout:127.0.0.1:{port}"),
+            "--timeout",
+            "5",
+        ])
+        .output()
+        .unwrap()
+}
+
+fn round_trip(flavor: &str, file: &str) {
+    let (_m, port) = mock(flavor);
+    let file = root().join(file);
+    let before = params("check", &file, port);
+    let out = String::from_utf8_lossy(&before.stdout);
+    assert!(
+        !before.status.success(),
+        "defaults differ from the file:\n{out}"
+    );
+    assert!(out.contains("MISMATCH"), "{out}");
+    let applied = params("apply", &file, port);
+    let out = String::from_utf8_lossy(&applied.stdout);
+    assert!(
+        applied.status.success(),
+        "{out}\n{}",
+        String::from_utf8_lossy(&applied.stderr)
+    );
+    assert!(out.contains("applied") && !out.contains("FAILED"), "{out}");
+    let after = params("check", &file, port);
+    let out = String::from_utf8_lossy(&after.stdout);
+    assert!(after.status.success(), "{out}");
+    assert!(
+        !out.contains("MISMATCH") && out.contains("not as the file says"),
+        "{out}"
+    );
+}
+
+#[test]
+fn px4_params_file_check_apply_check() {
+    round_trip("px4", "firmware-params/px4-offboard-tracking.params");
+}
+
+#[test]
+fn ardupilot_parm_file_check_apply_check() {
+    round_trip(
+        "ardupilot",
+        "firmware-params/ardupilot-guided-tracking.parm",
+    );
+}
+
+#[test]
+fn a_parameter_the_vehicle_lacks_is_reported_not_skipped() {
+    let (_m, port) = mock("ardupilot");
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("x.parm");
+    std::fs::write(&f, "GUID_TIMEOUT,2\nNOT_A_PARAM,1\n").unwrap();
+    let o = params("apply", &f, port);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(!o.status.success());
+    assert!(
+        out.contains("NOT_A_PARAM") && out.contains("NOT ON VEHICLE"),
+        "{out}"
+    );
+    assert!(
+        out.contains("GUID_TIMEOUT") && out.contains("applied"),
+        "{out}"
+    );
+}
+
+#[test]
+fn a_malformed_line_names_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("bad.params");
+    std::fs::write(&f, "# ok\n1\t1\tCOM_OF_LOSS_T\t1.0\t9\n1\t1\tBROKEN\n").unwrap();
+    let o = params("check", &f, 9);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("bad.params:3") && err.contains("expected 5"),
+        "{err}"
+    );
+}
