@@ -20,6 +20,20 @@ fn lab_config() -> Config {
     c
 }
 
+/// A JSON array of number arrays, row after row, as f32.
+fn flatten_f32(rows: &serde_json::Value) -> Vec<f32> {
+    rows.as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|row| {
+            row.as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap() as f32)
+        })
+        .collect()
+}
+
 #[test]
 fn rust_outputs_match_pytorch_within_1e_4() {
     let c = lab_config();
@@ -28,28 +42,8 @@ fn rust_outputs_match_pytorch_within_1e_4() {
         &std::fs::read_to_string(root().join("models/dmmn_parity.json")).unwrap(),
     )
     .unwrap();
-    let inputs: Vec<f32> = fixture["inputs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|row| {
-            row.as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap() as f32)
-        })
-        .collect();
-    let expected: Vec<f32> = fixture["outputs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|row| {
-            row.as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap() as f32)
-        })
-        .collect();
+    let inputs = flatten_f32(&fixture["inputs"]);
+    let expected = flatten_f32(&fixture["outputs"]);
     let n = expected.len() / 2;
     assert!(n >= 32, "fixture has {n} cases");
     assert_eq!(inputs.len(), n * 10 * 2);

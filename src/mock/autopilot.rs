@@ -123,7 +123,8 @@ fn param_id_str(id: &mavlink::types::CharArray<16>) -> String {
     id.to_str().unwrap_or("").trim_end_matches('\0').to_string()
 }
 
-fn mav_param_type(t: ParamType) -> MavParamType {
+/// The MAV_PARAM_TYPE of a ParamType.
+pub fn mav_param_type_of(t: ParamType) -> MavParamType {
     match t {
         ParamType::Uint8 => MavParamType::MAV_PARAM_TYPE_UINT8,
         ParamType::Int8 => MavParamType::MAV_PARAM_TYPE_INT8,
@@ -147,11 +148,6 @@ pub fn param_type_of(t: MavParamType) -> Option<ParamType> {
         MavParamType::MAV_PARAM_TYPE_REAL32 => ParamType::Real32,
         _ => return None,
     })
-}
-
-/// The MAV_PARAM_TYPE of a ParamType.
-pub fn mav_param_type_of(t: ParamType) -> MavParamType {
-    mav_param_type(t)
 }
 
 impl MockAutopilot {
@@ -389,7 +385,7 @@ impl MockAutopilot {
             param_count: self.params.len() as u16,
             param_index: index,
             param_id: p.name.as_str().into(),
-            param_type: mav_param_type(p.ty),
+            param_type: mav_param_type_of(p.ty),
         })
     }
 
