@@ -47,7 +47,8 @@ struct MockArgs {
     /// px4 or ardupilot.
     #[arg(long)]
     flavor: String,
-    /// Where to listen or connect: udpin:HOST:PORT, tcpin:HOST:PORT, serial:PATH:BAUD, ...
+    /// Where to listen or connect: udpin:HOST:PORT, tcpin:HOST:PORT, serial:PATH:BAUD, or
+    /// `pty` for a pseudo-terminal null modem whose other end is printed for the companion.
     #[arg(long, default_value = "udpin:127.0.0.1:14550")]
     listen: String,
     /// Start from the flavour's defaults with this parameter file applied.
@@ -56,6 +57,19 @@ struct MockArgs {
     /// Drop this share of messages in both directions, percent.
     #[arg(long, default_value_t = 0.0)]
     loss: f64,
+    /// One-way latency added to every message, milliseconds.
+    #[arg(long, default_value_t = 0.0)]
+    delay_ms: f64,
+    /// Deliver this share of messages twice, percent.
+    #[arg(long, default_value_t = 0.0)]
+    duplicate: f64,
+    /// Hold back this share of messages so that later ones overtake them, percent.
+    #[arg(long, default_value_t = 0.0)]
+    reorder: f64,
+    /// MAVLink 2 signing key file (64 hex digits): sign everything and refuse unsigned
+    /// frames.
+    #[arg(long)]
+    signing_key: Option<PathBuf>,
     /// Seed of the fault draws.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -300,11 +314,27 @@ fn mock_autopilot(a: MockArgs) -> Result<()> {
     use infotrack::mock::{server, MockConfig};
     let flavor: infotrack::autopilot::modes::Flavor =
         a.flavor.parse().map_err(anyhow::Error::msg)?;
-    infotrack::autopilot::link::check_url(&a.listen)
-        .map_err(|e| anyhow::anyhow!("--listen `{}`: {e}", a.listen))?;
-    if !(0.0..=100.0).contains(&a.loss) {
-        bail!("--loss must be a percentage 0-100, got {}", a.loss);
+    if a.listen != "pty" {
+        infotrack::autopilot::link::check_url(&a.listen)
+            .map_err(|e| anyhow::anyhow!("--listen `{}`: {e}", a.listen))?;
     }
+    for (name, v) in [
+        ("--loss", a.loss),
+        ("--duplicate", a.duplicate),
+        ("--reorder", a.reorder),
+    ] {
+        if !(0.0..=100.0).contains(&v) {
+            bail!("{name} must be a percentage 0-100, got {v}");
+        }
+    }
+    if !(a.delay_ms.is_finite() && (0.0..=60_000.0).contains(&a.delay_ms)) {
+        bail!("--delay-ms must be 0-60000, got {}", a.delay_ms);
+    }
+    let signing_key = a
+        .signing_key
+        .as_deref()
+        .map(infotrack::autopilot::signing::SigningKey::load)
+        .transpose()?;
     let mut cfg = MockConfig::new(flavor);
     cfg.estimator_ready_after_s = a.estimator_ready_after;
     if let Some(path) = &a.params {
@@ -322,17 +352,33 @@ fn mock_autopilot(a: MockArgs) -> Result<()> {
         }
     }
     runtime()?.block_on(async move {
-        let _mock = server::spawn(
-            &a.listen,
-            cfg,
-            server::Faults {
+        // The null modem must outlive the mock.
+        let (_null_modem, listen, companion) = if a.listen == "pty" {
+            let nm = infotrack::mock::null_modem::NullModem::new()?;
+            let listen = format!("serial:{}:57600", nm.vehicle_path());
+            let companion = format!("serial:{}:57600", nm.companion_path());
+            (Some(nm), listen, companion)
+        } else {
+            (None, a.listen.clone(), a.listen.clone())
+        };
+        let opts = server::ServerOptions {
+            faults: server::Faults {
                 loss_percent: a.loss,
+                delay: std::time::Duration::from_secs_f64(a.delay_ms / 1e3),
+                duplicate_percent: a.duplicate,
+                reorder_percent: a.reorder,
                 seed: a.seed,
             },
-        )
-        .await
-        .with_context(|| format!("cannot open {}", a.listen))?;
-        eprintln!("mock {flavor} autopilot on {} (Ctrl-C to stop)", a.listen);
+            signing_key,
+        };
+        let _mock = server::spawn_with(&listen, cfg, opts)
+            .await
+            .with_context(|| format!("cannot open {listen}"))?;
+        eprintln!("mock {flavor} autopilot on {listen} (Ctrl-C to stop)");
+        if _null_modem.is_some() {
+            // The companion's end, on stdout so that scripts can read it.
+            println!("{companion}");
+        }
         wait_for_signal().await;
         Ok(())
     })

@@ -4,19 +4,14 @@
 use std::time::Duration;
 
 use infotrack::autopilot::frames::PositionEnu;
-use infotrack::autopilot::link::{LinkConfig, LinkEvent, VehicleLink};
+use infotrack::autopilot::link::{LinkConfig, VehicleLink};
 use infotrack::autopilot::modes::{Flavor, Mode};
 use infotrack::autopilot::params_file::ParamType;
 use infotrack::mock::server::{spawn, Faults};
 use infotrack::mock::{MockConfig, MockEvent};
 
-fn free_udp_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
+mod common;
+use common::{expect_failsafe, fly_to, free_udp_port};
 
 async fn setup(
     flavor: Flavor,
@@ -30,6 +25,7 @@ async fn setup(
         Faults {
             loss_percent,
             seed: 7,
+            ..Faults::default()
         },
     )
     .await
@@ -44,53 +40,6 @@ async fn setup(
         flavor
     );
     (mock, link)
-}
-
-async fn fly_to(link: &VehicleLink, x: f64, y: f64, alt: f64) {
-    let p = PositionEnu {
-        x_east_m: x,
-        y_north_m: y,
-        z_up_m: alt,
-    };
-    link.set_setpoint(p, 0.0).unwrap();
-    link.wait_for(
-        |s| {
-            s.local_ned
-                .map(|(_, n, _)| {
-                    let e = n.to_enu();
-                    (e.x_east_m - x).hypot(e.y_north_m - y) < 0.5 && (e.z_up_m - alt).abs() < 0.5
-                })
-                .unwrap_or(false)
-        },
-        &format!("reaching ({x}, {y}, {alt})"),
-        Duration::from_secs(20),
-    )
-    .await
-    .unwrap();
-}
-
-async fn expect_failsafe(
-    link: &VehicleLink,
-    rx: &mut tokio::sync::broadcast::Receiver<LinkEvent>,
-    want: Mode,
-) {
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(15);
-    loop {
-        match tokio::time::timeout_at(deadline, rx.recv()).await {
-            Ok(Ok(LinkEvent::ModeChanged {
-                to,
-                commanded: false,
-                ..
-            })) if to == want => break,
-            Ok(Ok(_)) | Ok(Err(_)) => continue,
-            Err(_) => panic!("no failsafe to {want:?}; state {:?}", link.state().mode),
-        }
-    }
-    assert!(link
-        .state()
-        .unexpected_mode_changes
-        .iter()
-        .any(|(_, to)| *to == want));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

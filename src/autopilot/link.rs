@@ -19,6 +19,7 @@ use tokio::task::JoinHandle;
 use super::frames::{yaw_enu_to_ned, PositionEnu, PositionNed};
 use super::modes::{Flavor, Mode};
 use super::params_file::{decode_wire, encode_wire, ParamType};
+use super::signing::SigningKey;
 use crate::mock::autopilot::{mav_param_type_of, param_type_of};
 use crate::world::geometry::BoundsEnu;
 
@@ -106,6 +107,13 @@ pub struct LinkConfig {
     pub setpoint_hz: f64,
     /// Where setpoints may go, world ENU (the geofence).
     pub geofence_enu: Option<BoundsEnu>,
+    /// MAVLink 2 signing: when set, everything sent is signed and only frames signed with
+    /// this key are accepted.
+    pub signing_key: Option<SigningKey>,
+    /// Signing link id (tells our streams apart from other signers with the same key).
+    pub signing_link_id: u8,
+    /// The vehicle counts as lost after this long without its heartbeat.
+    pub heartbeat_timeout: Duration,
 }
 
 impl LinkConfig {
@@ -119,6 +127,9 @@ impl LinkConfig {
             attempts: 5,
             setpoint_hz: 20.0,
             geofence_enu: None,
+            signing_key: None,
+            signing_link_id: 1,
+            heartbeat_timeout: Duration::from_secs(3),
         }
     }
 }
@@ -191,6 +202,12 @@ pub enum LinkEvent {
         /// Whether this link asked for it.
         commanded: bool,
     },
+    /// No heartbeat from the vehicle for the configured timeout.
+    VehicleLost,
+    /// Heartbeats again after [`LinkEvent::VehicleLost`].
+    VehicleBack,
+    /// The vehicle's boot clock went backwards: it rebooted (and is disarmed).
+    VehicleRebooted,
 }
 
 /// The vehicle as the link last saw it.
@@ -220,6 +237,12 @@ pub struct VehicleState {
     pub unexpected_mode_changes: Vec<(Mode, Mode)>,
     /// The mode the link last asked for.
     pub commanded_mode: Option<Mode>,
+    /// No heartbeat for the configured timeout (cleared by the next one).
+    pub lost: bool,
+    /// Times the link saw the vehicle's boot clock restart.
+    pub reboots: u32,
+    /// Latest time_boot_ms seen in telemetry, ms.
+    pub time_boot_ms: Option<u32>,
 }
 
 struct Streamer {
@@ -261,6 +284,9 @@ impl VehicleLink {
             })?;
         conn.set_protocol_version(MavlinkVersion::V2);
         conn.set_allow_recv_any_version(true);
+        if let Some(key) = &cfg.signing_key {
+            conn.setup_signing(Some(key.config(cfg.signing_link_id)));
+        }
         let conn = Arc::new(conn);
         let state = Arc::new(Mutex::new(VehicleState::default()));
         let (events, _) = broadcast::channel(1024);
@@ -314,6 +340,24 @@ impl VehicleLink {
                 }
             })
         };
+        let watchdog = {
+            let state = state.clone();
+            let events = events.clone();
+            let timeout = cfg.heartbeat_timeout;
+            tokio::spawn(async move {
+                let mut t = tokio::time::interval(Duration::from_millis(100));
+                loop {
+                    t.tick().await;
+                    let mut s = state.lock().expect("state poisoned");
+                    let stale = s.last_heartbeat.is_some_and(|h| h.elapsed() > timeout);
+                    if stale && !s.lost {
+                        s.lost = true;
+                        tracing::warn!("vehicle lost: no heartbeat for {timeout:?}");
+                        let _ = events.send(LinkEvent::VehicleLost);
+                    }
+                }
+            })
+        };
         let stream = {
             let conn = conn.clone();
             let streamer = streamer.clone();
@@ -349,7 +393,7 @@ impl VehicleLink {
             events,
             heartbeat_paused,
             streamer,
-            tasks: vec![reader, heartbeat, stream],
+            tasks: vec![reader, heartbeat, watchdog, stream],
         })
     }
 
@@ -711,6 +755,21 @@ fn position_target(
     })
 }
 
+/// Follows the vehicle's boot clock; a jump back by more than a second (more than any
+/// reordering on a link) is a reboot.
+fn boot_clock(s: &mut VehicleState, events: &broadcast::Sender<LinkEvent>, t_ms: u32) {
+    if let Some(last) = s.time_boot_ms {
+        if t_ms.saturating_add(1000) < last {
+            s.reboots += 1;
+            tracing::warn!("vehicle rebooted (boot clock {last} ms -> {t_ms} ms)");
+            let _ = events.send(LinkEvent::VehicleRebooted);
+            s.time_boot_ms = Some(t_ms);
+            return;
+        }
+    }
+    s.time_boot_ms = Some(s.time_boot_ms.map_or(t_ms, |l| l.max(t_ms)));
+}
+
 fn on_message(
     state: &Mutex<VehicleState>,
     events: &broadcast::Sender<LinkEvent>,
@@ -731,6 +790,11 @@ fn on_message(
             s.flavor = Some(flavor);
             s.address = Some((h.system_id as u8, h.component_id));
             s.last_heartbeat = Some(now);
+            if s.lost {
+                s.lost = false;
+                tracing::info!("vehicle heartbeat back");
+                let _ = events.send(LinkEvent::VehicleBack);
+            }
             s.armed = hb
                 .base_mode
                 .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
@@ -766,6 +830,7 @@ fn on_message(
             }
         }
         MavMessage::LOCAL_POSITION_NED(p) => {
+            boot_clock(&mut s, events, p.time_boot_ms);
             s.local_ned = Some((
                 now,
                 PositionNed {
@@ -776,7 +841,10 @@ fn on_message(
                 [p.vx, p.vy, p.vz],
             ));
         }
-        MavMessage::ATTITUDE(a) => s.attitude = Some((now, [a.roll, a.pitch, a.yaw])),
+        MavMessage::ATTITUDE(a) => {
+            boot_clock(&mut s, events, a.time_boot_ms);
+            s.attitude = Some((now, [a.roll, a.pitch, a.yaw]));
+        }
         MavMessage::GLOBAL_POSITION_INT(g) => {
             s.global = Some((
                 now,

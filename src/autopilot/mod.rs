@@ -6,3 +6,4 @@ pub mod link;
 pub mod modes;
 pub mod params_file;
 pub mod params_sync;
+pub mod signing;

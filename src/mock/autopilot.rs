@@ -95,6 +95,8 @@ pub struct MockAutopilot {
     takeoff_alt_m: Option<f64>,
     last_gcs_heartbeat_s: Option<f64>,
     gcs_failsafe: bool,
+    /// Outside the geofence (the breach action fires once per breach).
+    fence_breached: bool,
     /// Stream period per message id, s (0: off).
     intervals: BTreeMap<u32, f64>,
     next_due: BTreeMap<u32, f64>,
@@ -190,6 +192,7 @@ impl MockAutopilot {
             takeoff_alt_m: None,
             last_gcs_heartbeat_s: None,
             gcs_failsafe: false,
+            fence_breached: false,
             intervals,
             next_due: BTreeMap::new(),
             boot_s: now_s,
@@ -200,6 +203,15 @@ impl MockAutopilot {
             text_id: 0,
             cfg,
         }
+    }
+
+    /// A power cycle at `now_s`: a fresh vehicle (disarmed, on the ground at home, default
+    /// stream rates, boot clock restarted) that kept its parameters, as parameters live in
+    /// the autopilot's flash.
+    pub fn reboot(&mut self, now_s: f64) {
+        let params = self.params.clone();
+        *self = Self::new(self.cfg.clone(), now_s);
+        self.params = params;
     }
 
     /// The flavour.
@@ -280,7 +292,9 @@ impl MockAutopilot {
     fn set_mode_internal(&mut self, mode: Mode) {
         self.mode = mode;
         self.target_ned_m = match mode {
-            Mode::Hold | Mode::Brake | Mode::Position => Some(self.state.pos_ned_m),
+            // Stop where braking at the acceleration limit ends, as a multicopter's brake
+            // and loiter do, rather than turning back to where the switch happened.
+            Mode::Hold | Mode::Brake | Mode::Position => Some(self.stopping_point()),
             Mode::Land => Some([self.state.pos_ned_m[0], self.state.pos_ned_m[1], 0.5]),
             Mode::ReturnToLaunch => Some([
                 self.home_ned_m[0],
@@ -296,6 +310,15 @@ impl MockAutopilot {
         if mode != Mode::Guided {
             self.takeoff_alt_m = None;
         }
+    }
+
+    fn stopping_point(&self) -> [f64; 3] {
+        let [x, y, z] = self.state.pos_ned_m;
+        let [vx, vy, _] = self.state.vel_ned_mps;
+        let a = self.limits().xy_accel_mps2.max(0.1);
+        let speed = vx.hypot(vy);
+        let k = speed / (2.0 * a);
+        [x + vx * k, y + vy * k, z]
     }
 
     fn failsafe(&mut self, reason: &str, mode: Mode, out: &mut Vec<MavMessage>) {
@@ -607,6 +630,7 @@ impl MockAutopilot {
                 let limits = self.limits();
                 self.state.step(self.target_ned_m, &limits, dt);
             }
+            self.check_geofence(&mut out);
             // RTL: over home, then land; landed: disarm.
             if self.mode == Mode::ReturnToLaunch {
                 let p = self.state.pos_ned_m;
@@ -633,6 +657,67 @@ impl MockAutopilot {
             }
         }
         out
+    }
+
+    /// The geofence from the flavour's parameters, around home: PX4 GF_MAX_HOR_DIST /
+    /// GF_MAX_VER_DIST (0 = off) with GF_ACTION; ArduPilot FENCE_ENABLE, FENCE_TYPE (bit 0
+    /// altitude, bit 1 circle), FENCE_RADIUS, FENCE_ALT_MAX with FENCE_ACTION.
+    fn check_geofence(&mut self, out: &mut Vec<MavMessage>) {
+        let p = self.state.pos_ned_m;
+        let horizontal = (p[0] - self.home_ned_m[0]).hypot(p[1] - self.home_ned_m[1]);
+        let altitude = self.state.altitude_m();
+        // A breach clears only once the vehicle is back inside by a margin (ArduPilot's
+        // FENCE_MARGIN, 2 m), or braking at the edge would trigger it again and again.
+        const MARGIN_M: f64 = 2.0;
+        let beyond = |value: f64, limit: f64, margin: f64| limit > 0.0 && value > limit - margin;
+        let (limits, action) = match self.cfg.flavor {
+            Flavor::Px4 => {
+                let max_h = self.params.get("GF_MAX_HOR_DIST", 0.0);
+                let max_v = self.params.get("GF_MAX_VER_DIST", 0.0);
+                let action = match self.params.get("GF_ACTION", 1.0) as i64 {
+                    2 => Some(Mode::Hold),
+                    3 => Some(Mode::ReturnToLaunch),
+                    5 => Some(Mode::Land),
+                    _ => None,
+                };
+                ([max_h, max_v], action)
+            }
+            Flavor::ArduPilot => {
+                let on = self.params.get("FENCE_ENABLE", 0.0) as i64 == 1;
+                let kinds = self.params.get("FENCE_TYPE", 7.0) as i64;
+                let max_h = if on && kinds & 2 != 0 {
+                    self.params.get("FENCE_RADIUS", 300.0)
+                } else {
+                    0.0
+                };
+                let max_v = if on && kinds & 1 != 0 {
+                    self.params.get("FENCE_ALT_MAX", 100.0)
+                } else {
+                    0.0
+                };
+                let action = match self.params.get("FENCE_ACTION", 1.0) as i64 {
+                    0 => None,
+                    2 => Some(Mode::Land),
+                    4 => Some(Mode::Brake),
+                    _ => Some(Mode::ReturnToLaunch),
+                };
+                ([max_h, max_v], action)
+            }
+        };
+        let outside = beyond(horizontal, limits[0], 0.0) || beyond(altitude, limits[1], 0.0);
+        let near = beyond(horizontal, limits[0], MARGIN_M) || beyond(altitude, limits[1], MARGIN_M);
+        if outside && !self.fence_breached {
+            self.fence_breached = true;
+            match action {
+                Some(mode) => self.failsafe("geofence breached", mode, out),
+                None => {
+                    let m = self.statustext(MavSeverity::MAV_SEVERITY_WARNING, "Geofence breached");
+                    out.push(m);
+                }
+            }
+        } else if !near {
+            self.fence_breached = false;
+        }
     }
 
     /// This vehicle's HEARTBEAT.

@@ -2,6 +2,8 @@
 //! behaviour (`autopilot.rs`, pure) and the transport shell (`server.rs`).
 
 pub mod autopilot;
+#[cfg(unix)]
+pub mod null_modem;
 pub mod params;
 pub mod server;
 pub mod vehicle;

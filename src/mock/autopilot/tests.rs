@@ -302,3 +302,91 @@ fn parameters_travel_with_each_firmwares_encoding() {
     };
     assert_eq!((v.param_value, v.param_index), (1000.0, u16::MAX));
 }
+
+#[test]
+fn px4_geofence_breach_fires_gf_action_once() {
+    let mut cfg = MockConfig::new(Flavor::Px4);
+    cfg.param_overrides = vec![("GF_MAX_HOR_DIST".into(), 20.0), ("GF_ACTION".into(), 3.0)];
+    let mut m = MockAutopilot::new(cfg, 0.0);
+    let t = stream(&mut m, 0.0, 1.5, Some([0.0, 0.0, -5.0]));
+    set_mode(&mut m, t, Mode::Offboard);
+    arm(&mut m, t);
+    // Inside the 20 m fence: nothing happens.
+    let t = stream(&mut m, t, t + 10.0, Some([15.0, 0.0, -5.0]));
+    assert_eq!(m.mode(), Mode::Offboard);
+    assert!(m.take_events().is_empty());
+    // A setpoint 40 m out: the vehicle crosses 20 m and returns (GF_ACTION 3).
+    stream(&mut m, t, t + 15.0, Some([40.0, 0.0, -5.0]));
+    let events = m.take_events();
+    assert_eq!(
+        events,
+        vec![MockEvent::Failsafe {
+            reason: "geofence breached".into(),
+            mode: Mode::ReturnToLaunch
+        }]
+    );
+    let p = m.position_ned_m();
+    assert!(p[0].hypot(p[1]) < 21.0, "flew on past the fence: {p:?}");
+}
+
+#[test]
+fn ardupilot_fence_off_by_default_and_circle_when_enabled() {
+    for (enable, want) in [(0.0, None), (1.0, Some(Mode::Brake))] {
+        let mut cfg = MockConfig::new(Flavor::ArduPilot);
+        cfg.param_overrides = vec![
+            ("FENCE_ENABLE".into(), enable),
+            ("FENCE_TYPE".into(), 2.0),
+            ("FENCE_RADIUS".into(), 30.0),
+            ("FENCE_ACTION".into(), 4.0),
+        ];
+        let mut m = MockAutopilot::new(cfg, 0.0);
+        set_mode(&mut m, 0.1, Mode::Guided);
+        arm(&mut m, 0.1);
+        m.handle(
+            0.2,
+            &GCS,
+            &cmd(
+                MavCmd::MAV_CMD_NAV_TAKEOFF,
+                [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0],
+            ),
+        );
+        let t = stream(&mut m, 0.2, 6.0, None);
+        stream(&mut m, t, t + 20.0, Some([0.0, 50.0, -5.0]));
+        let fired: Vec<Mode> = m
+            .take_events()
+            .into_iter()
+            .filter_map(|e| match e {
+                MockEvent::Failsafe { mode, .. } => Some(mode),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            fired,
+            want.into_iter().collect::<Vec<_>>(),
+            "FENCE_ENABLE {enable}"
+        );
+    }
+}
+
+#[test]
+fn reboot_keeps_parameters_and_forgets_the_flight() {
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::Px4), 0.0);
+    let t = stream(&mut m, 0.0, 1.5, Some([0.0, 0.0, -5.0]));
+    set_mode(&mut m, t, Mode::Offboard);
+    arm(&mut m, t);
+    let t = stream(&mut m, t, t + 5.0, Some([0.0, 0.0, -5.0]));
+    let value = 7.5;
+    assert!(m.params.set("MPC_XY_CRUISE", value));
+    m.reboot(t + 2.0);
+    assert!(!m.armed());
+    assert_eq!(m.mode(), Mode::Position);
+    assert_eq!(m.position_ned_m(), [0.0; 3]);
+    assert_eq!(m.params().get("MPC_XY_CRUISE", -1.0), value);
+    // The boot clock restarts: telemetry time stamps start again from zero.
+    let out = m.tick(t + 2.5);
+    let boot_ms = out.iter().find_map(|x| match x {
+        MavMessage::ATTITUDE(a) => Some(a.time_boot_ms),
+        _ => None,
+    });
+    assert_eq!(boot_ms, Some(500));
+}
