@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs what infotrack needs to build and run on a fresh Debian machine with Rust:
-# - Debian packages for font rendering in plots (fontconfig, freetype, DejaVu fonts) and
-#   pkg-config;
+# - Debian packages: font rendering for plots (fontconfig, freetype, DejaVu fonts),
+#   pkg-config, OpenCV 4.6 with contrib (camera capture, calibration files, solvePnP),
+#   clang/libclang (the opencv crate generates its bindings with it at build time), and
+#   GStreamer's base/good plugins (GStreamer camera pipelines);
 # - the ONNX Runtime shared library (for the learned motion model), taken from PyPI's
 #   onnxruntime==1.31.1 wheel into .deps/onnxruntime/.
 # Idempotent: does nothing when everything is present.
@@ -9,7 +11,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 need=()
-for pkg in pkg-config libfontconfig1-dev libfreetype-dev fonts-dejavu-core; do
+for pkg in pkg-config libfontconfig1-dev libfreetype-dev fonts-dejavu-core \
+  libopencv-dev libopencv-contrib-dev clang libclang-dev \
+  gstreamer1.0-plugins-base gstreamer1.0-plugins-good; do
   dpkg -s "$pkg" >/dev/null 2>&1 || need+=("$pkg")
 done
 if [ "${#need[@]}" -gt 0 ]; then

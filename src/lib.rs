@@ -29,4 +29,5 @@ pub mod motion;
 pub mod report;
 pub mod rng;
 pub mod sim;
+pub mod vision;
 pub mod world;

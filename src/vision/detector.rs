@@ -1,0 +1,241 @@
+//! Tag detection behind one small trait, with the AprilRobotics C library (AprilTag 3,
+//! through the `apriltag` crate, built from its bundled source) as the detector, and a
+//! region-of-interest search around where the filter expects the target.
+//!
+//! Why this detector: measured on this kind of machine (one thread, noisy synthetic frames),
+//! it gave 0.05 px median corner error at ~15 ms (640x480); OpenCV 4.6's aruco
+//! (DICT_APRILTAG_36h11) was slower and 5x less accurate, and a pure-Rust port missed tags
+//! at full resolution. Speed comes from the region of interest instead.
+
+use serde::{Deserialize, Serialize};
+
+use super::image::GrayImage;
+use super::VisionError;
+
+/// One detected tag, in OpenCV's pixel convention (pixel centres at integers).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TagDetection {
+    /// Tag id.
+    pub id: u32,
+    /// Centre, px.
+    pub center_px: [f64; 2],
+    /// Corners in the tag's own order (the AprilTag library's p[0..3]), px.
+    pub corners_px: [[f64; 2]; 4],
+    /// Bits corrected while decoding.
+    pub hamming: u32,
+    /// The library's decision margin (higher: more confident).
+    pub decision_margin: f64,
+}
+
+impl TagDetection {
+    /// Mean side length, px.
+    pub fn side_px(&self) -> f64 {
+        (0..4)
+            .map(|i| {
+                let (a, b) = (self.corners_px[i], self.corners_px[(i + 1) % 4]);
+                (a[0] - b[0]).hypot(a[1] - b[1])
+            })
+            .sum::<f64>()
+            / 4.0
+    }
+
+    fn shifted(mut self, dx: f64, dy: f64) -> Self {
+        self.center_px[0] += dx;
+        self.center_px[1] += dy;
+        for c in &mut self.corners_px {
+            c[0] += dx;
+            c[1] += dy;
+        }
+        self
+    }
+}
+
+/// A tag detector.
+pub trait TagDetector {
+    /// Short name for reports.
+    fn name(&self) -> &'static str;
+    /// All tags of the configured family in the image.
+    fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, VisionError>;
+}
+
+/// AprilTag detector settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DetectorConfig {
+    /// Quad detection on an image decimated by this factor (decoding stays at full
+    /// resolution and edges are refined on it, so accuracy is kept).
+    pub decimation: f32,
+    /// Gaussian blur before quad detection, px (0: none).
+    pub quad_sigma: f32,
+    /// Most bits corrected for a detection to count (0-2). More finds damaged tags and
+    /// accepts more false ones.
+    pub max_hamming: u32,
+    /// Decision margin below which a detection is dropped.
+    pub min_decision_margin: f64,
+    /// Detector threads.
+    pub threads: u8,
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        Self {
+            decimation: 2.0,
+            quad_sigma: 0.0,
+            max_hamming: 1,
+            min_decision_margin: 30.0,
+            threads: 1,
+        }
+    }
+}
+
+impl DetectorConfig {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.decimation >= 1.0 && self.decimation <= 8.0) {
+            return Err(format!("decimation {} must be 1-8", self.decimation));
+        }
+        if !(self.quad_sigma >= 0.0 && self.quad_sigma <= 5.0) {
+            return Err(format!("quad_sigma {} must be 0-5 px", self.quad_sigma));
+        }
+        if self.max_hamming > 2 {
+            return Err(format!("max_hamming {} must be 0-2", self.max_hamming));
+        }
+        if self.threads == 0 {
+            return Err("threads must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// The AprilRobotics AprilTag 3 detector for tag36h11.
+pub struct AprilTagDetector {
+    inner: apriltag::Detector,
+    cfg: DetectorConfig,
+}
+
+impl AprilTagDetector {
+    /// A tag36h11 detector.
+    pub fn new(cfg: DetectorConfig) -> Result<Self, VisionError> {
+        cfg.validate().map_err(VisionError::Config)?;
+        let mut inner = apriltag::Detector::builder()
+            .add_family_bits(apriltag::Family::tag_36h11(), cfg.max_hamming as usize)
+            .build()
+            .map_err(|e| VisionError::Detector(e.to_string()))?;
+        inner.set_decimation(cfg.decimation);
+        inner.set_sigma(cfg.quad_sigma);
+        inner.set_refine_edges(true);
+        inner.set_thread_number(cfg.threads);
+        Ok(Self { inner, cfg })
+    }
+}
+
+impl TagDetector for AprilTagDetector {
+    fn name(&self) -> &'static str {
+        "apriltag3"
+    }
+
+    fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, VisionError> {
+        if image.width == 0 || image.height == 0 {
+            return Err(VisionError::EmptyFrame {
+                width: image.width,
+                height: image.height,
+            });
+        }
+        let mut im = apriltag::Image::zeros_with_stride(image.width, image.height, image.width)
+            .map_err(|e| VisionError::Detector(e.to_string()))?;
+        im.as_slice_mut()[..image.data.len()].copy_from_slice(&image.data);
+        let mut out: Vec<TagDetection> = self
+            .inner
+            .detect(&im)
+            .into_iter()
+            .filter(|d| {
+                d.hamming() as u32 <= self.cfg.max_hamming
+                    && d.decision_margin() as f64 >= self.cfg.min_decision_margin
+            })
+            .map(|d| {
+                // The library puts pixel centres at +0.5; OpenCV at integers.
+                let c = d.center();
+                let k = d.corners();
+                TagDetection {
+                    id: d.id() as u32,
+                    center_px: [c[0] - 0.5, c[1] - 0.5],
+                    corners_px: k.map(|p| [p[0] - 0.5, p[1] - 0.5]),
+                    hamming: d.hamming() as u32,
+                    decision_margin: d.decision_margin() as f64,
+                }
+            })
+            .collect();
+        out.sort_by_key(|d| d.id);
+        Ok(out)
+    }
+}
+
+/// How a tracked detection was found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum SearchOutcome {
+    /// In the region of interest around the prediction.
+    Roi,
+    /// In the full frame (no prediction, or the region held no target tag).
+    FullFrame,
+}
+
+/// Searches a region around the predicted target first, the full frame only when that fails.
+pub struct RoiSearch<D: TagDetector> {
+    /// The detector.
+    pub detector: D,
+    /// Half-width of the region, as a multiple of the expected tag side (at least 32 px).
+    pub margin_sides: f64,
+}
+
+impl<D: TagDetector> RoiSearch<D> {
+    /// Wraps a detector.
+    pub fn new(detector: D) -> Self {
+        Self {
+            detector,
+            margin_sides: 1.5,
+        }
+    }
+
+    /// Detections of `target_ids` (empty: any id), searching around `predicted_px` (the
+    /// expected tag centre and side, px) first.
+    pub fn detect(
+        &mut self,
+        image: &GrayImage,
+        predicted: Option<([f64; 2], f64)>,
+        target_ids: &[u32],
+    ) -> Result<(Vec<TagDetection>, SearchOutcome), VisionError> {
+        let wanted = |d: &TagDetection| target_ids.is_empty() || target_ids.contains(&d.id);
+        if let Some((c, side)) = predicted {
+            let half = (self.margin_sides * side).max(32.0);
+            let x0 = (c[0] - half).floor().max(0.0);
+            let y0 = (c[1] - half).floor().max(0.0);
+            let x1 = (c[0] + half).ceil().min(image.width as f64);
+            let y1 = (c[1] + half).ceil().min(image.height as f64);
+            if x1 - x0 >= 16.0 && y1 - y0 >= 16.0 {
+                let crop = image.crop(
+                    x0 as usize,
+                    y0 as usize,
+                    (x1 - x0) as usize,
+                    (y1 - y0) as usize,
+                );
+                let found: Vec<TagDetection> = self
+                    .detector
+                    .detect(&crop)?
+                    .into_iter()
+                    .filter(wanted)
+                    .map(|d| d.shifted(x0, y0))
+                    .collect();
+                if !found.is_empty() {
+                    return Ok((found, SearchOutcome::Roi));
+                }
+            }
+        }
+        let found = self
+            .detector
+            .detect(image)?
+            .into_iter()
+            .filter(wanted)
+            .collect();
+        Ok((found, SearchOutcome::FullFrame))
+    }
+}

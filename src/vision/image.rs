@@ -1,0 +1,88 @@
+//! An 8-bit grey image with its capture time: what the camera delivers and the detector
+//! reads. Plain memory, no OpenCV, so that the core can render and test without it.
+
+use super::VisionError;
+
+/// An 8-bit single-channel image, row-major, no padding.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GrayImage {
+    /// Width, px.
+    pub width: usize,
+    /// Height, px.
+    pub height: usize,
+    /// Pixels, `width * height`, row-major.
+    pub data: Vec<u8>,
+}
+
+impl GrayImage {
+    /// Wraps pixels, checking the size.
+    pub fn new(width: usize, height: usize, data: Vec<u8>) -> Result<Self, VisionError> {
+        if width == 0 || height == 0 {
+            return Err(VisionError::EmptyFrame { width, height });
+        }
+        if data.len() != width * height {
+            return Err(VisionError::Config(format!(
+                "image of {width}x{height} px needs {} bytes, got {}",
+                width * height,
+                data.len()
+            )));
+        }
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// Pixel (x, y).
+    pub fn get(&self, x: usize, y: usize) -> u8 {
+        self.data[y * self.width + x]
+    }
+
+    /// The rectangle `[x0, x0 + w) x [y0, y0 + h)`, clipped to the image.
+    pub fn crop(&self, x0: usize, y0: usize, w: usize, h: usize) -> Self {
+        let x1 = (x0 + w).min(self.width);
+        let y1 = (y0 + h).min(self.height);
+        let (x0, y0) = (x0.min(x1), y0.min(y1));
+        let mut data = Vec::with_capacity((x1 - x0) * (y1 - y0));
+        for y in y0..y1 {
+            data.extend_from_slice(&self.data[y * self.width + x0..y * self.width + x1]);
+        }
+        Self {
+            width: x1 - x0,
+            height: y1 - y0,
+            data,
+        }
+    }
+}
+
+/// A frame from a camera: the image and when it was captured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Sequence number from the source, from 0.
+    pub index: u64,
+    /// Capture time, s, on the clock of whoever made the frame (the companion's monotonic
+    /// clock for a live camera, the file's time line for a video).
+    pub capture_time_s: f64,
+    /// The image.
+    pub image: GrayImage,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_are_checked_and_crops_clip() {
+        assert!(matches!(
+            GrayImage::new(0, 10, vec![]),
+            Err(VisionError::EmptyFrame { .. })
+        ));
+        assert!(GrayImage::new(2, 2, vec![0; 3]).is_err());
+        let img = GrayImage::new(4, 3, (0..12).collect()).unwrap();
+        let c = img.crop(2, 1, 10, 10);
+        assert_eq!((c.width, c.height), (2, 2));
+        assert_eq!(c.data, vec![6, 7, 10, 11]);
+        assert_eq!(img.get(3, 2), 11);
+    }
+}
