@@ -140,6 +140,11 @@ struct SimArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Measure through rendered camera frames, the AprilTag detector and the ground
+    /// projection instead of the analytic measurement model (slower: one frame per filter
+    /// step).
+    #[arg(long)]
+    vision: bool,
 }
 
 #[derive(clap::Args)]
@@ -229,9 +234,23 @@ fn sim(a: SimArgs) -> Result<()> {
         duration_s: duration,
         keep_outputs: a.out.is_some(),
         progress: !a.quiet,
+        vision: a.vision,
     };
     let result = mc.run(&cfg)?;
     print!("{}", report::table::render(&result));
+    for r in &result.results {
+        if let Some(v) = r.vision {
+            println!(
+                "vision {}/{}: tag found in {}/{} frames ({:.1}%), {} of them in the region of interest",
+                r.guidance,
+                r.motion,
+                v.detections,
+                v.frames,
+                100.0 * v.detections as f64 / v.frames.max(1) as f64,
+                v.roi_hits
+            );
+        }
+    }
     if let Some(p) = &a.json {
         report::write_json(p, &result)?;
         println!("wrote {}", p.display());

@@ -6,7 +6,7 @@ use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, Vehi
 use infotrack::vision::capture::{Camera, CaptureConfig};
 use infotrack::vision::cv_io;
 use infotrack::vision::detector::{
-    AprilTagDetector, DetectorConfig, RoiSearch, SearchOutcome, TagDetection, TagDetector,
+    AprilTagDetector, DetectorConfig, RoiPx, RoiSearch, SearchOutcome, TagDetection, TagDetector,
 };
 use infotrack::vision::image::GrayImage;
 use infotrack::vision::projection::{measure_tag, ProjectionNoise};
@@ -178,16 +178,15 @@ fn the_region_of_interest_finds_the_same_tag_and_falls_back_to_the_full_frame() 
         .world_enu_to_pixel(s.target.position_enu_m, 0.0, &s.pose)
         .unwrap();
     // A prediction a few pixels off, as a filter's would be.
-    let predicted = ([center[0] + 6.0, center[1] - 4.0], full[0].side_px());
+    let predicted = RoiPx::around([center[0] + 6.0, center[1] - 4.0], full[0].side_px(), 3.0);
     let (roi, how) = search.detect(&img, Some(predicted), &[9]).unwrap();
     assert_eq!(how, SearchOutcome::Roi);
     for (a, b) in roi[0].corners_px.iter().zip(full[0].corners_px.iter()) {
         assert!((a[0] - b[0]).hypot(a[1] - b[1]) < 0.3, "{a:?} vs {b:?}");
     }
     // A prediction in the wrong place: the full frame still finds it.
-    let (far, how) = search
-        .detect(&img, Some(([40.0, 40.0], 60.0)), &[9])
-        .unwrap();
+    let wrong = RoiPx::around([40.0, 40.0], 60.0, 2.0);
+    let (far, how) = search.detect(&img, Some(wrong), &[9]).unwrap();
     assert_eq!(how, SearchOutcome::FullFrame);
     assert_eq!(far.len(), 1);
     // Another target id is not reported.
@@ -322,4 +321,65 @@ fn a_video_written_with_opencv_reads_back_with_the_same_detections() {
         n += 1;
     }
     assert_eq!(n, frames.len());
+}
+
+#[test]
+fn the_simulator_in_vision_mode_measures_through_rendered_frames() {
+    use infotrack::config::Config;
+    use infotrack::guidance::GuidanceKind;
+    use infotrack::sim::run::{run_once, EstimatorKind, RunSpec};
+    use infotrack::world::World;
+    let cfg = Config::default_lab();
+    let world = World::from_config(&cfg);
+    let spec = RunSpec {
+        guidance: GuidanceKind::Truth,
+        estimator: EstimatorKind::parse("cv").unwrap(),
+        seed: 3,
+        run_index: 0,
+        duration_s: 20.0,
+        snapshot_times_s: vec![],
+        vision: true,
+    };
+    let out = run_once(&cfg, &world, &spec).unwrap();
+    let stats = out.vision.unwrap();
+    assert_eq!(stats.frames as usize, out.steps.len());
+    let mut measured = 0;
+    for s in &out.steps {
+        if let Some(z) = s.measurement_enu {
+            measured += 1;
+            // Detector + projection at 1.2 m: millimetres, far inside R's 0.1 m.
+            assert!(
+                (z - s.target_enu).norm() < 0.01,
+                "t={} z={z:?} truth={:?}",
+                s.t_s,
+                s.target_enu
+            );
+            assert!(s.target_in_footprint);
+        }
+        if s.target_occluded {
+            // The tag's centre is under canopy: at least half of it is hidden.
+            assert!(
+                s.measurement_enu.is_none(),
+                "t={}: seen through the canopy",
+                s.t_s
+            );
+        }
+    }
+    let visible = out
+        .steps
+        .iter()
+        .filter(|s| s.target_in_footprint && !s.target_occluded)
+        .count();
+    eprintln!(
+        "{measured} measurements, {visible} steps with the target visible, ROI hits {}",
+        stats.roi_hits
+    );
+    assert_eq!(stats.detections, measured as u64);
+    // Flying over the target, most visible steps give a measurement (a tag cut by the edge
+    // of the image or of a canopy is the rest).
+    assert!(
+        measured as f64 >= 0.7 * visible as f64,
+        "{measured} of {visible}"
+    );
+    assert!(out.summary.estimation_error_m.is_finite());
 }

@@ -77,6 +77,49 @@ pub struct Config {
     pub kalman: KalmanConfig,
     /// Guidance laws.
     pub guidance: GuidanceConfig,
+    /// The synthetic camera and detector of the simulator's vision mode (`sim --vision`).
+    #[serde(default)]
+    pub vision: VisionSimConfig,
+}
+
+/// The simulator's vision mode: measurements come from rendered frames through the real
+/// detector and projection instead of the analytic model.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VisionSimConfig {
+    /// Rendered image width, px; the height follows from the fields of view with square
+    /// pixels.
+    pub image_width_px: u32,
+    /// The target's tag36h11 id.
+    pub tag_id: u32,
+    /// Side of the tag's black square, m.
+    pub tag_size_m: f64,
+    /// Samples per pixel side when rendering (anti-aliasing).
+    pub supersample: usize,
+    /// Sensor noise, grey levels (one sigma).
+    pub noise_sigma: f64,
+    /// Optical blur, px (one sigma).
+    pub blur_sigma_px: f64,
+    /// The AprilTag detector's settings.
+    pub detector: crate::vision::detector::DetectorConfig,
+    /// Uncertainties behind each measurement's covariance.
+    pub projection: crate::vision::projection::ProjectionNoise,
+}
+
+impl Default for VisionSimConfig {
+    fn default() -> Self {
+        Self {
+            image_width_px: 640,
+            tag_id: 0,
+            // The paper's lab: a 0.84 m footprint at 1.2 m; a 10 cm tag is ~75 px wide.
+            tag_size_m: 0.1,
+            supersample: 2,
+            noise_sigma: 2.0,
+            blur_sigma_px: 0.5,
+            detector: Default::default(),
+            projection: Default::default(),
+        }
+    }
 }
 
 /// A node of the road network.

@@ -89,6 +89,7 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     }
 
     validate_road(c)?;
+    validate_vision(c)?;
 
     for (i, occ) in c.occlusions.iter().enumerate() {
         let key = format!("occlusions[{i}].vertices_enu_m");
@@ -351,5 +352,42 @@ fn validate_road(c: &Config) -> Result<(), ConfigError> {
         }
         stack.extend(road.edges.iter().filter(|e| e.from == n).map(|e| e.to));
     }
+    Ok(())
+}
+
+fn validate_vision(c: &Config) -> Result<(), ConfigError> {
+    let v = &c.vision;
+    if !(64..=4096).contains(&v.image_width_px) {
+        return Err(invalid(
+            "vision.image_width_px",
+            v.image_width_px,
+            "must be 64-4096",
+        ));
+    }
+    if v.tag_id >= crate::vision::tag_family::TAG36H11_CODES {
+        return Err(invalid(
+            "vision.tag_id",
+            v.tag_id,
+            "not a tag36h11 id (0-586)",
+        ));
+    }
+    positive("vision.tag_size_m", v.tag_size_m)?;
+    if !(1..=8).contains(&v.supersample) {
+        return Err(invalid("vision.supersample", v.supersample, "must be 1-8"));
+    }
+    for (k, x) in [
+        ("vision.noise_sigma", v.noise_sigma),
+        ("vision.blur_sigma_px", v.blur_sigma_px),
+    ] {
+        if !(x.is_finite() && x >= 0.0) {
+            return Err(invalid(k, x, "must be finite and >= 0"));
+        }
+    }
+    v.detector
+        .validate()
+        .map_err(|e| invalid("vision.detector", &v.detector, &e))?;
+    v.projection
+        .validate()
+        .map_err(|e| invalid("vision.projection", &v.projection, &e))?;
     Ok(())
 }

@@ -31,6 +31,19 @@ pub struct MonteCarlo {
     pub keep_outputs: bool,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// Measure through rendered frames and the real detector (`sim --vision`).
+    pub vision: bool,
+}
+
+/// How the camera frames went in vision mode, summed over runs.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct VisionSummary {
+    /// Frames rendered and searched.
+    pub frames: u64,
+    /// Frames in which the target's tag was found.
+    pub detections: u64,
+    /// Detections found in the region of interest around the filter's prediction.
+    pub roi_hits: u64,
 }
 
 /// A median, as the JSON schema wants it.
@@ -78,6 +91,9 @@ pub struct ComboResult {
     /// or when EER was not run.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub welch_vs_eer: Option<VersusEer>,
+    /// Frame statistics (vision mode only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vision: Option<VisionSummary>,
     /// Per-run summaries.
     pub per_run: Vec<RunSummary>,
 }
@@ -154,6 +170,7 @@ impl MonteCarlo {
                     run_index: r,
                     duration_s: self.duration_s,
                     snapshot_times_s: snapshot_times.clone(),
+                    vision: self.vision,
                 };
                 let out = run_once(cfg, &world, &spec);
                 bar.inc(1);
@@ -235,6 +252,21 @@ fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput]) -> ComboRes
             median: median(&all_guid),
         },
         welch_vs_eer: None,
+        vision: outs
+            .iter()
+            .filter_map(|o| o.vision)
+            .fold(None, |acc: Option<VisionSummary>, v| {
+                let a = acc.unwrap_or(VisionSummary {
+                    frames: 0,
+                    detections: 0,
+                    roi_hits: 0,
+                });
+                Some(VisionSummary {
+                    frames: a.frames + v.frames,
+                    detections: a.detections + v.detections,
+                    roi_hits: a.roi_hits + v.roi_hits,
+                })
+            }),
         per_run,
     }
 }

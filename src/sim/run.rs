@@ -36,6 +36,9 @@ pub enum RunError {
     /// The filter failed.
     #[error(transparent)]
     Filter(#[from] FilterError),
+    /// The vision pipeline failed (vision mode).
+    #[error(transparent)]
+    Vision(#[from] crate::vision::VisionError),
 }
 
 /// What estimates the target: a particle filter with a motion model, or the Kalman filter.
@@ -99,6 +102,9 @@ pub struct RunSpec {
     pub duration_s: f64,
     /// Times (s) at which to keep a copy of the particles for plots.
     pub snapshot_times_s: Vec<f64>,
+    /// Measure through rendered frames, the detector and the projection instead of the
+    /// analytic model.
+    pub vision: bool,
 }
 
 /// The particle set at one instant.
@@ -123,6 +129,8 @@ pub struct RunOutput {
     pub guidance_ms: Vec<f64>,
     /// Filter steps' compute times, ms.
     pub filter_ms: Vec<f64>,
+    /// Frame statistics in vision mode.
+    pub vision: Option<super::vision_sensor::VisionStats>,
 }
 
 enum Estimator {
@@ -175,6 +183,11 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
         && spec.estimator != EstimatorKind::Kalman)
         .then(|| KalmanFilter::from_config(cfg));
     let mut planner = EerPlanner::new(EerParams::from_config(cfg));
+    let mut sensor = if spec.vision {
+        Some(super::vision_sensor::VisionSensor::from_config(cfg)?)
+    } else {
+        None
+    };
     let mut lawn = LawnmowerPath::new(&cfg.guidance.lawn);
 
     let dt_phys = 1.0 / cfg.timing.physics_hz;
@@ -198,8 +211,24 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
         if t + 1e-9 >= next_filter as f64 / cfg.timing.filter_hz {
             next_filter += 1;
             let truth = target.position_enu;
-            let visible = world.is_visible(&agent.position_enu, &truth);
-            let z = visible.then(|| world.measurement.measure(&truth, &mut rng_meas));
+            let z = match sensor.as_mut() {
+                Some(s) => {
+                    // The frame's noise comes from the measurement stream, like the
+                    // analytic model's.
+                    let frame_seed = rand::Rng::gen(&mut rng_meas);
+                    s.measure(
+                        &agent.position_enu,
+                        &truth,
+                        target.heading_enu_rad,
+                        Some((estimator.mean(), estimator.covariance())),
+                        frame_seed,
+                    )?
+                }
+                None => {
+                    let visible = world.is_visible(&agent.position_enu, &truth);
+                    visible.then(|| world.measurement.measure(&truth, &mut rng_meas))
+                }
+            };
             if let Some(z) = z {
                 last_meas = Some((t, z));
             }
@@ -288,6 +317,7 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
         snapshots,
         guidance_ms,
         filter_ms,
+        vision: sensor.map(|s| s.stats),
     })
 }
 
@@ -330,6 +360,7 @@ mod tests {
             run_index: 0,
             duration_s: 20.0,
             snapshot_times_s: vec![5.0, 10.0],
+            vision: false,
         }
     }
 

@@ -179,12 +179,33 @@ pub enum SearchOutcome {
     FullFrame,
 }
 
+/// A square region of interest, px (OpenCV convention).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoiPx {
+    /// Where the tag's centre is expected.
+    pub center_px: [f64; 2],
+    /// Half the side of the square to search.
+    pub half_px: f64,
+}
+
+impl RoiPx {
+    /// The region a filter's prediction calls for: the expected tag side plus three standard
+    /// deviations of the predicted position (`sigma_px`, its largest axis), at least 32 px.
+    pub fn around(center_px: [f64; 2], tag_side_px: f64, sigma_px: f64) -> Self {
+        Self {
+            center_px,
+            half_px: (tag_side_px + 3.0 * sigma_px).max(32.0),
+        }
+    }
+}
+
 /// Searches a region around the predicted target first, the full frame only when that fails.
 pub struct RoiSearch<D: TagDetector> {
     /// The detector.
     pub detector: D,
-    /// Half-width of the region, as a multiple of the expected tag side (at least 32 px).
-    pub margin_sides: f64,
+    /// A region wider than this share of the image width is searched as the full frame
+    /// (no saving left).
+    pub max_roi_fraction: f64,
 }
 
 impl<D: TagDetector> RoiSearch<D> {
@@ -192,21 +213,24 @@ impl<D: TagDetector> RoiSearch<D> {
     pub fn new(detector: D) -> Self {
         Self {
             detector,
-            margin_sides: 1.5,
+            max_roi_fraction: 0.6,
         }
     }
 
-    /// Detections of `target_ids` (empty: any id), searching around `predicted_px` (the
-    /// expected tag centre and side, px) first.
+    /// Detections of `target_ids` (empty: any id), searching `roi` first.
     pub fn detect(
         &mut self,
         image: &GrayImage,
-        predicted: Option<([f64; 2], f64)>,
+        roi: Option<RoiPx>,
         target_ids: &[u32],
     ) -> Result<(Vec<TagDetection>, SearchOutcome), VisionError> {
         let wanted = |d: &TagDetection| target_ids.is_empty() || target_ids.contains(&d.id);
-        if let Some((c, side)) = predicted {
-            let half = (self.margin_sides * side).max(32.0);
+        let roi = roi.filter(|r| 2.0 * r.half_px <= self.max_roi_fraction * image.width as f64);
+        if let Some(RoiPx {
+            center_px: c,
+            half_px: half,
+        }) = roi
+        {
             let x0 = (c[0] - half).floor().max(0.0);
             let y0 = (c[1] - half).floor().max(0.0);
             let x1 = (c[0] + half).ceil().min(image.width as f64);
