@@ -40,6 +40,28 @@ enum Command {
     MockAutopilot(MockArgs),
     /// Compare a parameter file with a vehicle (`check`) or write it (`apply`).
     Params(ParamsArgs),
+    /// Detect AprilTags (tag36h11) in an image, a folder of images, or a video.
+    Detect(DetectArgs),
+}
+
+#[derive(clap::Args)]
+struct DetectArgs {
+    /// An image file, a folder of images (sorted by name), or a video file.
+    path: PathBuf,
+    /// Print exactly {"detections": [{"frame", "id", "center_px", "corners_px"}]} (OpenCV
+    /// pixel convention, corners in the tag's own order).
+    #[arg(long)]
+    json: bool,
+    /// Project each tag to the ground for the camera pose in this TOML file (calibration
+    /// file, vehicle pose, optional mount); adds ground_enu_m and its covariance.
+    #[arg(long)]
+    pose: Option<PathBuf>,
+    /// Write each frame with its detections drawn into this folder.
+    #[arg(long)]
+    annotate: Option<PathBuf>,
+    /// Only these tag ids (comma-separated; default all).
+    #[arg(long, value_delimiter = ',')]
+    ids: Vec<u32>,
 }
 
 #[derive(clap::Args)]
@@ -161,7 +183,13 @@ struct BenchArgs {
     /// The learned model to time (its rows are skipped, with the reason, if it does not load).
     #[arg(long, default_value = "models/dmmn.onnx")]
     model: PathBuf,
+    /// Time tag detection instead (full frame vs region of interest, 640x480 and
+    /// 1280x720); --repetitions is the number of frames per resolution.
+    #[arg(long)]
+    vision: bool,
 }
+
+mod detect;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -179,6 +207,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Sim(a) => sim(a),
         Command::Bench(a) => bench(a),
+        Command::Detect(a) => detect::run(a.path, a.json, a.pose, a.annotate, a.ids),
         Command::Dataset(a) => dataset(a),
         Command::MockAutopilot(a) => mock_autopilot(a),
         Command::Params(a) => params(a),
@@ -290,6 +319,15 @@ fn sim(a: SimArgs) -> Result<()> {
 fn bench(a: BenchArgs) -> Result<()> {
     if a.repetitions == 0 {
         bail!("--repetitions must be at least 1");
+    }
+    if a.vision {
+        let rows = infotrack::vision::detect_bench::run(a.repetitions, a.seed)?;
+        print!("{}", infotrack::vision::detect_bench::render_table(&rows));
+        if let Some(p) = &a.json {
+            report::write_json(p, &rows)?;
+            println!("wrote {}", p.display());
+        }
+        return Ok(());
     }
     let r = infotrack::bench::run(a.repetitions, a.seed, &a.model);
     print!("{}", infotrack::bench::render(&r));

@@ -9,8 +9,10 @@
 pub mod camera_model;
 pub mod capture;
 pub mod cv_io;
+pub mod detect_bench;
 pub mod detector;
 pub mod image;
+pub mod pose_file;
 pub mod projection;
 pub mod render;
 pub mod tag_family;
