@@ -21,6 +21,7 @@
 pub mod autopilot;
 pub mod bench;
 pub mod config;
+pub mod daemon;
 pub mod estimation;
 pub mod guidance;
 pub mod metrics;

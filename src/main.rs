@@ -42,6 +42,9 @@ enum Command {
     Params(ParamsArgs),
     /// Detect AprilTags (tag36h11) in an image, a folder of images, or a video.
     Detect(DetectArgs),
+    /// The daemon: camera -> detector -> particle filter -> EER -> setpoints over MAVLink.
+    /// The embedded default flies the simulated scenario through the mock autopilot.
+    Run(run_cmd::RunArgs),
 }
 
 #[derive(clap::Args)]
@@ -190,6 +193,7 @@ struct BenchArgs {
 }
 
 mod detect;
+mod run_cmd;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -206,6 +210,7 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Sim(a) => sim(a),
+        Command::Run(a) => runtime().and_then(|rt| run_cmd::run(a, rt)),
         Command::Bench(a) => bench(a),
         Command::Detect(a) => detect::run(a.path, a.json, a.pose, a.annotate, a.ids),
         Command::Dataset(a) => dataset(a),

@@ -114,6 +114,8 @@ pub struct LinkConfig {
     pub signing_link_id: u8,
     /// The vehicle counts as lost after this long without its heartbeat.
     pub heartbeat_timeout: Duration,
+    /// Log every message sent and received to this telemetry log (.tlog).
+    pub tlog: Option<std::path::PathBuf>,
 }
 
 impl LinkConfig {
@@ -130,6 +132,7 @@ impl LinkConfig {
             signing_key: None,
             signing_link_id: 1,
             heartbeat_timeout: Duration::from_secs(3),
+            tlog: None,
         }
     }
 }
@@ -258,6 +261,7 @@ pub struct VehicleLink {
     events: broadcast::Sender<LinkEvent>,
     heartbeat_paused: Arc<AtomicBool>,
     streamer: Arc<Streamer>,
+    tlog: Option<Arc<super::tlog::Tlog>>,
     tasks: Vec<JoinHandle<()>>,
 }
 
@@ -288,6 +292,15 @@ impl VehicleLink {
             conn.setup_signing(Some(key.config(cfg.signing_link_id)));
         }
         let conn = Arc::new(conn);
+        let tlog = match &cfg.tlog {
+            Some(p) => Some(Arc::new(super::tlog::Tlog::create(p).map_err(|e| {
+                LinkError::Connect {
+                    url: cfg.url.clone(),
+                    message: format!("cannot create the telemetry log {}: {e}", p.display()),
+                }
+            })?)),
+            None => None,
+        };
         let state = Arc::new(Mutex::new(VehicleState::default()));
         let (events, _) = broadcast::channel(1024);
         let header = MavHeader {
@@ -303,13 +316,19 @@ impl VehicleLink {
 
         let reader = {
             let conn = conn.clone();
+            let tlog = tlog.clone();
             let state = state.clone();
             let events = events.clone();
             let me = (cfg.system_id, cfg.component_id);
             tokio::spawn(async move {
                 loop {
                     match conn.recv().await {
-                        Ok((h, m)) => on_message(&state, &events, me, &h, &m),
+                        Ok((h, m)) => {
+                            if let Some(t) = &tlog {
+                                t.record(&h, &m);
+                            }
+                            on_message(&state, &events, me, &h, &m)
+                        }
                         Err(e) => {
                             tracing::debug!("link: receive error: {e}");
                             tokio::time::sleep(Duration::from_millis(5)).await;
@@ -320,6 +339,7 @@ impl VehicleLink {
         };
         let heartbeat = {
             let conn = conn.clone();
+            let tlog = tlog.clone();
             let paused = heartbeat_paused.clone();
             tokio::spawn(async move {
                 let mut t = tokio::time::interval(Duration::from_secs(1));
@@ -336,6 +356,9 @@ impl VehicleLink {
                         system_status: MavState::MAV_STATE_ACTIVE,
                         mavlink_version: 3,
                     });
+                    if let Some(t) = &tlog {
+                        t.record(&header, &hb);
+                    }
                     let _ = conn.send(&header, &hb).await;
                 }
             })
@@ -360,6 +383,7 @@ impl VehicleLink {
         };
         let stream = {
             let conn = conn.clone();
+            let tlog = tlog.clone();
             let streamer = streamer.clone();
             let state = state.clone();
             let period = Duration::from_secs_f64(1.0 / cfg.setpoint_hz.max(1.0));
@@ -382,6 +406,9 @@ impl VehicleLink {
                         .address
                         .unwrap_or((1, 1));
                     let m = position_target(target, p, yaw, start.elapsed().as_millis() as u32);
+                    if let Some(t) = &tlog {
+                        t.record(&header, &m);
+                    }
                     let _ = conn.send(&header, &m).await;
                 }
             })
@@ -393,6 +420,7 @@ impl VehicleLink {
             events,
             heartbeat_paused,
             streamer,
+            tlog,
             tasks: vec![reader, heartbeat, watchdog, stream],
         })
     }
@@ -450,6 +478,9 @@ impl VehicleLink {
     }
 
     async fn send(&self, m: &MavMessage) -> Result<(), LinkError> {
+        if let Some(t) = &self.tlog {
+            t.record(&self.header(), m);
+        }
         self.conn
             .send(&self.header(), m)
             .await
@@ -580,6 +611,15 @@ impl VehicleLink {
         *self.streamer.target_ned.lock().expect("streamer poisoned") =
             Some((p.to_ned(), yaw_enu_to_ned(yaw_enu_rad) as f32));
         Ok(())
+    }
+
+    /// Flushes the telemetry log, if any.
+    pub fn flush_tlog(&self) {
+        if let Some(t) = &self.tlog {
+            if let Err(e) = t.flush() {
+                tracing::warn!("telemetry log: {e}");
+            }
+        }
     }
 
     /// Pauses or resumes the setpoint stream (tests; a stalled companion).

@@ -7,3 +7,4 @@ pub mod modes;
 pub mod params_file;
 pub mod params_sync;
 pub mod signing;
+pub mod tlog;

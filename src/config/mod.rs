@@ -80,6 +80,59 @@ pub struct Config {
     /// The synthetic camera and detector of the simulator's vision mode (`sim --vision`).
     #[serde(default)]
     pub vision: VisionSimConfig,
+    /// The daemon (`infotrack run`): vehicle link, camera, rates and failsafes.
+    #[serde(default)]
+    pub daemon: DaemonConfig,
+}
+
+/// The daemon's settings (`infotrack run`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DaemonConfig {
+    /// The vehicle: `mock:px4` or `mock:ardupilot` (an in-process mock autopilot spoken to
+    /// over MAVLink on loopback UDP), or a MAVLink URL (`udpin:0.0.0.0:14540`,
+    /// `serial:/dev/ttyAMA0:921600`, ...).
+    pub vehicle: String,
+    /// The camera: `synthetic` (frames rendered from the simulated target; needs the
+    /// simulated world). Real capture sources are not wired into the daemon yet.
+    pub camera: String,
+    /// Own MAVLink system id.
+    pub system_id: u8,
+    /// Own MAVLink component id (191: onboard computer).
+    pub component_id: u8,
+    /// Setpoint stream rate, Hz (PX4 needs more than 2; at least 10).
+    pub setpoint_hz: f64,
+    /// Seconds to wait for the vehicle's heartbeat at start.
+    pub connect_timeout_s: f64,
+    /// Seconds allowed for the takeoff to reach the agent's altitude.
+    pub takeoff_timeout_s: f64,
+    /// The target counts as lost after this long without a measurement, s.
+    pub target_lost_after_s: f64,
+    /// What to do while the target is lost: `eer` (keep the EER search), `lawn` (lawnmower
+    /// sweep), `hold` (stay where the vehicle is).
+    pub target_lost_fallback: String,
+    /// A guidance decision that takes longer than this is not applied and is counted, ms.
+    pub guidance_budget_ms: f64,
+    /// MAVLink 2 signing key file (64 hex digits); none: unsigned.
+    pub signing_key: Option<PathBuf>,
+}
+
+impl Default for DaemonConfig {
+    fn default() -> Self {
+        Self {
+            vehicle: "mock:px4".into(),
+            camera: "synthetic".into(),
+            system_id: 1,
+            component_id: 191,
+            setpoint_hz: 20.0,
+            connect_timeout_s: 10.0,
+            takeoff_timeout_s: 30.0,
+            target_lost_after_s: 10.0,
+            target_lost_fallback: "eer".into(),
+            guidance_budget_ms: 300.0,
+            signing_key: None,
+        }
+    }
 }
 
 /// The simulator's vision mode: measurements come from rendered frames through the real

@@ -90,6 +90,7 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
 
     validate_road(c)?;
     validate_vision(c)?;
+    validate_daemon(c)?;
 
     for (i, occ) in c.occlusions.iter().enumerate() {
         let key = format!("occlusions[{i}].vertices_enu_m");
@@ -389,5 +390,45 @@ fn validate_vision(c: &Config) -> Result<(), ConfigError> {
     v.projection
         .validate()
         .map_err(|e| invalid("vision.projection", &v.projection, &e))?;
+    Ok(())
+}
+
+fn validate_daemon(c: &Config) -> Result<(), ConfigError> {
+    let d = &c.daemon;
+    match d.vehicle.as_str() {
+        "mock:px4" | "mock:ardupilot" => {}
+        url => crate::autopilot::link::check_url(url).map_err(|e| {
+            invalid(
+                "daemon.vehicle",
+                url,
+                &format!("not mock:px4, mock:ardupilot or a MAVLink URL: {e}"),
+            )
+        })?,
+    }
+    if d.camera != "synthetic" {
+        return Err(invalid(
+            "daemon.camera",
+            &d.camera,
+            "only `synthetic` is wired into the daemon so far",
+        ));
+    }
+    if !(d.setpoint_hz.is_finite() && (10.0..=100.0).contains(&d.setpoint_hz)) {
+        return Err(invalid(
+            "daemon.setpoint_hz",
+            d.setpoint_hz,
+            "must be 10-100 Hz",
+        ));
+    }
+    positive("daemon.connect_timeout_s", d.connect_timeout_s)?;
+    positive("daemon.takeoff_timeout_s", d.takeoff_timeout_s)?;
+    positive("daemon.target_lost_after_s", d.target_lost_after_s)?;
+    positive("daemon.guidance_budget_ms", d.guidance_budget_ms)?;
+    if !["eer", "lawn", "hold"].contains(&d.target_lost_fallback.as_str()) {
+        return Err(invalid(
+            "daemon.target_lost_fallback",
+            &d.target_lost_fallback,
+            "must be eer, lawn or hold",
+        ));
+    }
     Ok(())
 }

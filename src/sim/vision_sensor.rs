@@ -37,6 +37,8 @@ pub struct VisionSensor {
     altitude_m: f64,
     /// What happened so far.
     pub stats: VisionStats,
+    /// Time the last frame took to render (the camera's part, not the pipeline's), ms.
+    pub last_render_ms: f64,
 }
 
 impl VisionSensor {
@@ -78,6 +80,7 @@ impl VisionSensor {
             occluders,
             altitude_m: cfg.agent.altitude_m,
             stats: VisionStats::default(),
+            last_render_ms: 0.0,
         })
     }
 
@@ -113,7 +116,9 @@ impl VisionSensor {
             occluders: self.occluders.clone(),
             ground_seed: 17,
         };
+        let t0 = std::time::Instant::now();
         let img = render(&self.cam, &pose, &scene, &self.opts, frame_seed);
+        self.last_render_ms = t0.elapsed().as_secs_f64() * 1e3;
         self.stats.frames += 1;
         let side_px = self.tag_size_m * self.cam.intrinsics.fx_px / self.altitude_m;
         let px_per_m = self.cam.intrinsics.fx_px / self.altitude_m;

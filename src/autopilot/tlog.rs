@@ -1,0 +1,120 @@
+//! A telemetry log (`.tlog`) of a MAVLink link, the format MAVProxy, QGroundControl and
+//! pymavlink read: for every message, an 8-byte big-endian timestamp (microseconds since
+//! the Unix epoch) followed by the MAVLink frame.
+//!
+//! Frames are written re-serialised from the parsed message and its header (system,
+//! component, sequence as received); a signed frame is logged without its signature.
+
+use std::io::Write;
+use std::path::Path;
+use std::sync::Mutex;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use mavlink::dialects::ardupilotmega::MavMessage;
+use mavlink::{MavHeader, MavlinkVersion};
+
+/// An open telemetry log.
+pub struct Tlog {
+    out: Mutex<std::io::BufWriter<std::fs::File>>,
+}
+
+impl Tlog {
+    /// Creates (truncates) the log file.
+    pub fn create(path: &Path) -> std::io::Result<Self> {
+        Ok(Self {
+            out: Mutex::new(std::io::BufWriter::new(std::fs::File::create(path)?)),
+        })
+    }
+
+    /// Appends one message.
+    pub fn record(&self, header: &MavHeader, msg: &MavMessage) {
+        let mut frame = Vec::with_capacity(300);
+        if mavlink::write_versioned_msg(&mut frame, MavlinkVersion::V2, *header, msg).is_err() {
+            return;
+        }
+        let us = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map(|d| d.as_micros() as u64)
+            .unwrap_or(0);
+        let mut out = self.out.lock().expect("tlog poisoned");
+        // A full disk must not stop the flight; the log is best effort and flushed at the end.
+        let _ = out.write_all(&us.to_be_bytes());
+        let _ = out.write_all(&frame);
+    }
+
+    /// Flushes to disk.
+    pub fn flush(&self) -> std::io::Result<()> {
+        self.out.lock().expect("tlog poisoned").flush()
+    }
+}
+
+/// Reads a tlog back: (timestamp us, header, message) for every frame.
+pub fn read(path: &Path) -> std::io::Result<Vec<(u64, MavHeader, MavMessage)>> {
+    let bytes = std::fs::read(path)?;
+    let bad = |at: usize, what: String| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("{}: byte {at}: {what}", path.display()),
+        )
+    };
+    let mut out = Vec::new();
+    let mut at = 0;
+    while at < bytes.len() {
+        // Timestamp, then a MAVLink 2 frame: STX, len, incompat flags, ... payload, CRC,
+        // and a 13-byte signature when flagged.
+        if bytes.len() < at + 8 + 10 || bytes[at + 8] != 0xfd {
+            return Err(bad(at, "not a timestamped MAVLink 2 frame".into()));
+        }
+        let ts = u64::from_be_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+        let f = at + 8;
+        let len = 10 + bytes[f + 1] as usize + 2 + if bytes[f + 2] & 1 != 0 { 13 } else { 0 };
+        let frame = bytes
+            .get(f..f + len)
+            .ok_or_else(|| bad(at, "truncated frame".into()))?;
+        let mut reader = mavlink::MavlinkReader::new(frame);
+        let (h, m) = reader
+            .read_message::<MavMessage>(MavlinkVersion::V2)
+            .map_err(|e| bad(at, e.to_string()))?;
+        out.push((ts, h, m));
+        at = f + len;
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavlink::dialects::ardupilotmega::*;
+
+    #[test]
+    fn messages_round_trip_through_a_tlog() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("link.tlog");
+        let log = Tlog::create(&p).unwrap();
+        let h = MavHeader {
+            system_id: 1,
+            component_id: 191,
+            sequence: 42,
+        };
+        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+            mavlink_version: 3,
+            ..Default::default()
+        });
+        let pos = MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+            time_boot_ms: 1234,
+            x: 1.5,
+            y: -2.0,
+            z: -10.0,
+            ..Default::default()
+        });
+        log.record(&h, &hb);
+        log.record(&h, &pos);
+        log.flush().unwrap();
+        let back = read(&p).unwrap();
+        assert_eq!(back.len(), 2);
+        assert_eq!(back[0].1.sequence, 42);
+        assert_eq!(back[1].2, pos);
+        assert!(back[0].0 > 1_600_000_000_000_000, "a Unix time in us");
+    }
+}

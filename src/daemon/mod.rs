@@ -1,0 +1,338 @@
+//! The daemon (`infotrack run`): the closed loop from camera to setpoints.
+//!
+//! Tasks: the vehicle link (heartbeat, telemetry reader, setpoint streamer at >= 10 Hz,
+//! heartbeat watchdog), a supervisor loop here that feeds the vehicle's pose to the pipeline,
+//! applies its commands inside the geofence, pauses commands while the link is lost, prints
+//! the status line and stops on SIGINT/SIGTERM, the duration or a fault; and the pipeline
+//! thread (camera, detector, particle filter with the DMMN, EER) off the reactor.
+//!
+//! On the embedded default the vehicle is an in-process mock autopilot reached through real
+//! MAVLink over loopback UDP, and the camera is the synthetic one.
+//!
+//! Not built yet: a simulated clock (the loop runs on the wall clock, so 90 s of flight take
+//! 90 s), real camera capture in the daemon, and `infotrack replay`.
+
+pub mod pipeline;
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use thiserror::Error;
+
+use crate::autopilot::frames::PositionEnu;
+use crate::autopilot::link::{LinkConfig, LinkError, VehicleLink};
+use crate::autopilot::modes::{Flavor, Mode};
+use crate::autopilot::signing::SigningKey;
+use crate::config::Config;
+use crate::metrics::RunSummary;
+use crate::mock::server::{spawn, Faults, MockHandle};
+use crate::mock::MockConfig;
+use crate::vision::camera_model::VehiclePoseNed;
+use pipeline::{Command, PipelineOutput, Ready, Shared, VehicleSnapshot};
+
+/// Why the daemon stopped with an error.
+#[derive(Debug, Error)]
+pub enum DaemonError {
+    /// A setting or input is wrong.
+    #[error("{0}")]
+    Setup(String),
+    /// The vehicle link failed.
+    #[error(transparent)]
+    Link(#[from] LinkError),
+}
+
+/// Command-line choices of one run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Seconds of tracking after takeoff.
+    pub duration_s: f64,
+    /// Seed of the simulated world, the filter and guidance.
+    pub seed: u64,
+    /// Motion model name for the filter (`dmmn`, `cv`).
+    pub motion: String,
+    /// Telemetry log to write, if any.
+    pub tlog: Option<PathBuf>,
+    /// Print the status line every second on stderr.
+    pub status_line: bool,
+}
+
+/// Why the loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// The requested duration elapsed.
+    Duration,
+    /// SIGINT or SIGTERM.
+    Signal,
+}
+
+/// What a run produced.
+pub struct DaemonReport {
+    /// The pipeline's records and timings.
+    pub output: PipelineOutput,
+    /// Metrics over the filter steps (as `infotrack sim` computes them).
+    pub summary: RunSummary,
+    /// Why it ended.
+    pub stopped_by: StopReason,
+    /// The vehicle's mode after the clean stop.
+    pub final_mode: Option<Mode>,
+    /// Mode changes the vehicle made by itself (failsafes).
+    pub unexpected_mode_changes: Vec<(Mode, Mode)>,
+    /// Times the link lost the vehicle's heartbeat.
+    pub link_losses: u32,
+    /// Setpoints refused by the geofence check.
+    pub geofence_refusals: u64,
+    /// The firmware flown.
+    pub flavor: Flavor,
+    /// The in-process mock, when the vehicle was one (for tests and fault injection).
+    pub mock: Option<MockHandle>,
+}
+
+fn free_udp_port() -> Result<u16, DaemonError> {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .map(|a| a.port())
+        .map_err(|e| DaemonError::Setup(format!("no free UDP port on loopback: {e}")))
+}
+
+/// Starts the in-process mock for `mock:px4` / `mock:ardupilot`, with the agent's speed and
+/// acceleration limits as its parameters; returns it and the URL to reach it.
+async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String), DaemonError> {
+    let port = free_udp_port()?;
+    let mut mc = MockConfig::new(flavor);
+    let a = &cfg.agent;
+    mc.param_overrides = match flavor {
+        Flavor::Px4 => vec![
+            ("MPC_XY_VEL_MAX".into(), a.speed_limit_mps),
+            ("MPC_ACC_HOR".into(), a.accel_limit_mps2),
+        ],
+        // ArduPilot's are in cm/s and cm/s^2.
+        Flavor::ArduPilot => vec![
+            ("WPNAV_SPEED".into(), a.speed_limit_mps * 100.0),
+            ("WPNAV_ACCEL".into(), a.accel_limit_mps2 * 100.0),
+        ],
+    };
+    let mock = spawn(&format!("udpin:127.0.0.1:{port}"), mc, Faults::default())
+        .await
+        .map_err(|e| DaemonError::Setup(format!("cannot start the mock autopilot: {e}")))?;
+    Ok((mock, format!("udpout:127.0.0.1:{port}")))
+}
+
+/// Resolves when SIGINT or SIGTERM arrives.
+async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        let (Ok(mut term), Ok(mut int)) = (
+            signal(SignalKind::terminate()),
+            signal(SignalKind::interrupt()),
+        ) else {
+            std::future::pending::<()>().await;
+            return;
+        };
+        tokio::select! {
+            _ = term.recv() => {}
+            _ = int.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+fn snapshot(link: &VehicleLink) -> Option<VehicleSnapshot> {
+    let s = link.state();
+    let (_, p, _) = s.local_ned?;
+    let att = s.attitude.map(|(_, a)| a).unwrap_or([0.0; 3]);
+    Some(VehicleSnapshot {
+        pose: VehiclePoseNed {
+            position_ned_m: [p.x_north_m, p.y_east_m, p.z_down_m],
+            roll_rad: att[0] as f64,
+            pitch_rad: att[1] as f64,
+            yaw_rad: att[2] as f64,
+        },
+        link_lost: s.lost,
+    })
+}
+
+/// Runs the daemon: starts the pipeline (model, detector), connects to the vehicle, takes
+/// off, tracks for `opts.duration_s` (or until SIGINT/SIGTERM), then holds.
+pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, DaemonError> {
+    let d = cfg.daemon.clone();
+    // The pipeline first: a missing model or a bad detector setting is an error before
+    // anything flies.
+    let shared = Shared::new();
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let (go_tx, go_rx) = mpsc::channel();
+    let pipeline = {
+        let (cfg, shared, motion, seed) =
+            (cfg.clone(), shared.clone(), opts.motion.clone(), opts.seed);
+        std::thread::Builder::new()
+            .name("pipeline".into())
+            .spawn(move || pipeline::run(cfg, motion, seed, shared, ready_tx, go_rx))
+            .map_err(|e| DaemonError::Setup(format!("cannot start the pipeline thread: {e}")))?
+    };
+    let ready = tokio::task::spawn_blocking(move || ready_rx.recv())
+        .await
+        .map_err(|e| DaemonError::Setup(e.to_string()))?;
+    match ready {
+        Ok(Ready::Ok) => {}
+        Ok(Ready::Err(e)) => return Err(DaemonError::Setup(e)),
+        Err(_) => {
+            return Err(DaemonError::Setup(
+                "the pipeline thread died at start".into(),
+            ))
+        }
+    }
+
+    let (mock, url) = match d.vehicle.as_str() {
+        "mock:px4" => {
+            let (m, u) = start_mock(cfg, Flavor::Px4).await?;
+            (Some(m), u)
+        }
+        "mock:ardupilot" => {
+            let (m, u) = start_mock(cfg, Flavor::ArduPilot).await?;
+            (Some(m), u)
+        }
+        url => (None, url.to_string()),
+    };
+    let mut lc = LinkConfig::new(&url);
+    lc.system_id = d.system_id;
+    lc.component_id = d.component_id;
+    lc.setpoint_hz = d.setpoint_hz;
+    lc.geofence_enu = Some(cfg.workspace_enu);
+    lc.tlog = opts.tlog.clone();
+    lc.signing_key = d
+        .signing_key
+        .as_deref()
+        .map(SigningKey::load)
+        .transpose()
+        .map_err(|e| DaemonError::Setup(e.to_string()))?;
+    let link = VehicleLink::connect(lc).await?;
+    let flavor = link
+        .wait_vehicle(Duration::from_secs_f64(d.connect_timeout_s))
+        .await?;
+    tracing::info!("vehicle: {flavor} on {url}");
+    link.request_telemetry().await?;
+    link.take_off(
+        cfg.agent.altitude_m,
+        Duration::from_secs_f64(d.takeoff_timeout_s),
+    )
+    .await?;
+    // Start where the simulator's agent starts.
+    let start = cfg.agent.start_enu_m;
+    link.set_setpoint(
+        PositionEnu {
+            x_east_m: start[0],
+            y_north_m: start[1],
+            z_up_m: cfg.agent.altitude_m,
+        },
+        0.0,
+    )?;
+
+    *shared.vehicle.lock().expect("shared poisoned") = snapshot(&link);
+    let _ = go_tx.send(());
+    let began = Instant::now();
+    let mut tick = tokio::time::interval(Duration::from_millis(20));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let signal = shutdown_signal();
+    tokio::pin!(signal);
+    let mut last_status = Instant::now();
+    let mut applied: Option<Command> = None;
+    let mut geofence_refusals = 0u64;
+    let mut link_losses = 0u32;
+    let mut was_lost = false;
+    let stopped_by = loop {
+        tokio::select! {
+            _ = &mut signal => break StopReason::Signal,
+            _ = tick.tick() => {}
+        }
+        if began.elapsed().as_secs_f64() >= opts.duration_s {
+            break StopReason::Duration;
+        }
+        let snap = snapshot(&link);
+        *shared.vehicle.lock().expect("shared poisoned") = snap;
+        let lost = link.state().lost;
+        if lost != was_lost {
+            // Commands on stale state are worse than none: the vehicle's own failsafe acts.
+            link.pause_setpoints(lost);
+            if lost {
+                link_losses += 1;
+            }
+            was_lost = lost;
+        }
+        let cmd = *shared.command.lock().expect("shared poisoned");
+        if cmd != applied && !lost {
+            if let Some(c) = cmd {
+                let target = match c {
+                    Command::GoTo(w) => Some(w),
+                    Command::HoldHere => snap.map(|s| {
+                        crate::world::geometry::Enu2::new(
+                            s.pose.position_ned_m[1],
+                            s.pose.position_ned_m[0],
+                        )
+                    }),
+                };
+                if let Some(w) = target {
+                    let p = PositionEnu {
+                        x_east_m: w.x,
+                        y_north_m: w.y,
+                        z_up_m: cfg.agent.altitude_m,
+                    };
+                    if let Err(e) = link.set_setpoint(p, 0.0) {
+                        geofence_refusals += 1;
+                        tracing::warn!("{e}");
+                    }
+                }
+            }
+            applied = cmd;
+        }
+        if opts.status_line && last_status.elapsed() >= Duration::from_secs(1) {
+            last_status = Instant::now();
+            let st = *shared.status.lock().expect("shared poisoned");
+            let mode = link
+                .state()
+                .mode
+                .map(|m| format!("{m:?}"))
+                .unwrap_or_else(|| "?".into());
+            if let Some(s) = st {
+                eprintln!(
+                    "t={:5.1}s mode={mode} target={} N_eff={:6.1} H={:6.2} state={}",
+                    s.t_s,
+                    if s.seen { "seen" } else { "unseen" },
+                    s.n_eff,
+                    s.entropy,
+                    s.state.as_str()
+                );
+            }
+        }
+    };
+
+    shared.stop.store(true, Ordering::Relaxed);
+    let output = tokio::task::spawn_blocking(move || pipeline.join())
+        .await
+        .map_err(|e| DaemonError::Setup(e.to_string()))?
+        .map_err(|_| DaemonError::Setup("the pipeline thread panicked".into()))?;
+    // Clean stop: hold before exiting.
+    let hold = link.hold().await;
+    if let Err(e) = &hold {
+        tracing::error!("could not put the vehicle in hold: {e}");
+    }
+    let state = link.state();
+    link.flush_tlog();
+    let steps: Vec<_> = output.records.iter().map(|r| r.step.clone()).collect();
+    let summary = RunSummary::from_steps(&steps, &output.filter_ms, &output.guidance_ms);
+    Ok(DaemonReport {
+        summary,
+        stopped_by,
+        final_mode: state.mode,
+        unexpected_mode_changes: state.unexpected_mode_changes.clone(),
+        link_losses,
+        geofence_refusals,
+        flavor,
+        mock,
+        output,
+    })
+}

@@ -1,0 +1,329 @@
+//! The daemon's pipeline thread: the simulated world (target on its roads), the camera
+//! (rendered from the vehicle's reported pose), the detector, the particle filter with the
+//! DMMN, and EER guidance, on the wall clock at the configured rates. It runs on its own OS
+//! thread so that the DMMN, the filter and EER never block the async reactor; it talks to
+//! the async side only through [`Shared`].
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crate::config::Config;
+use crate::estimation::{FilterParams, ParticleFilter};
+use crate::guidance::{EerParams, EerPlanner, LawnmowerPath};
+use crate::metrics::StepRecord;
+use crate::motion;
+use crate::rng::{stream_rng, Stream};
+use crate::sim::target::TargetSim;
+use crate::sim::vision_sensor::{VisionSensor, VisionStats};
+use crate::vision::camera_model::VehiclePoseNed;
+use crate::world::geometry::Enu2;
+use crate::world::World;
+
+/// The vehicle as the link last reported it.
+#[derive(Debug, Clone, Copy)]
+pub struct VehicleSnapshot {
+    /// Pose from LOCAL_POSITION_NED and ATTITUDE.
+    pub pose: VehiclePoseNed,
+    /// No heartbeat for the link's timeout.
+    pub link_lost: bool,
+}
+
+/// What the pipeline asks the vehicle to do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    /// Fly to this point, world ENU, at the agent's altitude.
+    GoTo(Enu2),
+    /// Stay where it is (target-lost fallback `hold`).
+    HoldHere,
+}
+
+/// Tracking state, for the status line and the log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrackState {
+    /// Seen within the target-lost time.
+    Tracking,
+    /// Not seen for longer: the fallback is flying.
+    Lost,
+    /// No fresh vehicle state: no new commands.
+    LinkLost,
+}
+
+impl TrackState {
+    /// Lower-case name.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Self::Tracking => "tracking",
+            Self::Lost => "lost",
+            Self::LinkLost => "link-lost",
+        }
+    }
+}
+
+/// What the status line shows.
+#[derive(Debug, Clone, Copy)]
+pub struct Status {
+    /// Seconds since tracking started.
+    pub t_s: f64,
+    /// Whether the last frame had the target.
+    pub seen: bool,
+    /// Effective sample size after the last update.
+    pub n_eff: f64,
+    /// Entropy of the estimate at the last guidance decision.
+    pub entropy: f64,
+    /// Tracking state.
+    pub state: TrackState,
+}
+
+/// State shared between the pipeline thread and the async side.
+pub struct Shared {
+    /// Latest vehicle state (written by the async side).
+    pub vehicle: Mutex<Option<VehicleSnapshot>>,
+    /// Latest command (written by the pipeline).
+    pub command: Mutex<Option<Command>>,
+    /// Status line.
+    pub status: Mutex<Option<Status>>,
+    /// Ask the pipeline to finish.
+    pub stop: AtomicBool,
+}
+
+impl Shared {
+    /// Empty shared state.
+    pub fn new() -> Arc<Self> {
+        Arc::new(Self {
+            vehicle: Mutex::new(None),
+            command: Mutex::new(None),
+            status: Mutex::new(None),
+            stop: AtomicBool::new(false),
+        })
+    }
+}
+
+/// One filter step of the daemon, beyond what the simulator records.
+#[derive(Debug, Clone)]
+pub struct FlightRecord {
+    /// The simulator-compatible record (truth, vehicle position, measurement, estimate...).
+    pub step: StepRecord,
+    /// Vehicle pose at the frame.
+    pub pose: VehiclePoseNed,
+    /// Tracking state.
+    pub state: TrackState,
+    /// The command in force after this step.
+    pub command: Option<Command>,
+}
+
+/// What the pipeline produced.
+#[derive(Debug, Default)]
+pub struct PipelineOutput {
+    /// One per filter step.
+    pub records: Vec<FlightRecord>,
+    /// Filter step times, ms.
+    pub filter_ms: Vec<f64>,
+    /// Guidance decision times, ms.
+    pub guidance_ms: Vec<f64>,
+    /// Frame-to-command processing latency, ms, for every command: detection, projection and
+    /// filter update of the latest frame plus the guidance decision (the wait between the
+    /// frame and the next guidance tick is a matter of rates and is not included).
+    pub latency_ms: Vec<f64>,
+    /// Guidance decisions dropped for overrunning the budget.
+    pub guidance_overruns: u64,
+    /// Frame statistics.
+    pub vision: VisionStats,
+}
+
+/// Messages from the pipeline thread before it runs.
+pub enum Ready {
+    /// Built: model loaded, detector up.
+    Ok,
+    /// Could not start.
+    Err(String),
+}
+
+/// Builds everything, reports on `ready`, waits for `go`, then runs until `shared.stop`.
+pub fn run(
+    cfg: Config,
+    motion_name: String,
+    seed: u64,
+    shared: Arc<Shared>,
+    ready: mpsc::Sender<Ready>,
+    go: mpsc::Receiver<()>,
+) -> PipelineOutput {
+    let world = World::from_config(&cfg);
+    let mut rng_target = stream_rng(seed, 0, Stream::Target, 0);
+    let mut rng_meas = stream_rng(seed, 0, Stream::Measurement, 0);
+    let mut rng_filter = stream_rng(seed, 0, Stream::Filter, 0);
+    let mut rng_guid = stream_rng(seed, 0, Stream::Guidance, 0);
+    let mut model = match motion::build(&motion_name, &cfg) {
+        Ok(m) => m,
+        Err(e) => {
+            let _ = ready.send(Ready::Err(e.to_string()));
+            return PipelineOutput::default();
+        }
+    };
+    let mut sensor = match VisionSensor::from_config(&cfg) {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = ready.send(Ready::Err(e.to_string()));
+            return PipelineOutput::default();
+        }
+    };
+    let mut pf = ParticleFilter::new(
+        FilterParams::from_config(&cfg),
+        world.workspace_enu,
+        &mut rng_filter,
+    );
+    let mut planner = EerPlanner::new(EerParams::from_config(&cfg));
+    let mut lawn = LawnmowerPath::new(&cfg.guidance.lawn);
+    let mut target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
+    let _ = ready.send(Ready::Ok);
+    if go.recv().is_err() {
+        return PipelineOutput::default();
+    }
+
+    let d = &cfg.daemon;
+    let dt = 1.0 / cfg.timing.physics_hz;
+    let start = Instant::now();
+    let mut out = PipelineOutput::default();
+    let (mut next_filter, mut next_guid) = (1u64, 1u64);
+    let mut last_seen_s = 0.0;
+    let mut last_pose: Option<VehiclePoseNed> = None;
+    let mut last_frame_ms = 0.0;
+    let mut entropy = f64::NAN;
+    let mut last_eer = f64::NAN;
+    let mut command: Option<Command> = None;
+    let mut state = TrackState::Tracking;
+    let mut tick = 0u64;
+    while !shared.stop.load(Ordering::Relaxed) {
+        tick += 1;
+        let t = tick as f64 * dt;
+        // Real time: the target moves with the wall clock.
+        let due = start + Duration::from_secs_f64(t);
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        target.step(&world.road, dt, &mut rng_target);
+        let snapshot = *shared.vehicle.lock().expect("shared poisoned");
+        if let Some(s) = snapshot {
+            if !s.link_lost {
+                last_pose = Some(s.pose);
+            }
+        }
+        let link_lost = snapshot.map_or(true, |s| s.link_lost);
+        let Some(pose) = last_pose else { continue };
+        let agent = Enu2::new(pose.position_ned_m[1], pose.position_ned_m[0]);
+
+        if t + 1e-9 >= next_filter as f64 / cfg.timing.filter_hz {
+            next_filter += 1;
+            let truth = target.position_enu;
+            let started = Instant::now();
+            let frame_seed = rand::Rng::gen(&mut rng_meas);
+            let z = match sensor.measure(
+                &agent,
+                &truth,
+                target.heading_enu_rad,
+                Some((pf.mean(), pf.covariance())),
+                frame_seed,
+            ) {
+                Ok(z) => z,
+                Err(e) => {
+                    tracing::warn!("camera frame dropped: {e}");
+                    None
+                }
+            };
+            let n_eff = match pf.step(model.as_mut(), z, &agent, &world, &mut rng_filter) {
+                Ok(r) => r.n_eff,
+                Err(e) => {
+                    tracing::error!("filter step failed: {e}");
+                    f64::NAN
+                }
+            };
+            // From the frame's capture (the end of its rendering) to the updated filter.
+            last_frame_ms = started.elapsed().as_secs_f64() * 1e3 - sensor.last_render_ms;
+            out.filter_ms.push(last_frame_ms);
+            if z.is_some() {
+                last_seen_s = t;
+            }
+            state = if link_lost {
+                TrackState::LinkLost
+            } else if t - last_seen_s > d.target_lost_after_s {
+                TrackState::Lost
+            } else {
+                TrackState::Tracking
+            };
+            out.records.push(FlightRecord {
+                step: StepRecord {
+                    t_s: t,
+                    target_enu: truth,
+                    agent_enu: agent,
+                    waypoint_enu: match command {
+                        Some(Command::GoTo(w)) => w,
+                        _ => agent,
+                    },
+                    measurement_enu: z,
+                    estimate_enu: pf.mean(),
+                    cov_m2: pf.covariance(),
+                    n_eff,
+                    eer: last_eer,
+                    target_occluded: world.is_occluded(&truth),
+                    target_in_footprint: world.footprint.contains(&agent, &truth),
+                },
+                pose,
+                state,
+                command,
+            });
+            *shared.status.lock().expect("shared poisoned") = Some(Status {
+                t_s: t,
+                seen: z.is_some(),
+                n_eff,
+                entropy,
+                state,
+            });
+        }
+
+        if t + 1e-9 >= next_guid as f64 / cfg.timing.guidance_hz {
+            next_guid += 1;
+            if state == TrackState::LinkLost {
+                // No commands decided on stale vehicle state.
+                continue;
+            }
+            let started = Instant::now();
+            let fallback = state == TrackState::Lost;
+            let decided = match (fallback, d.target_lost_fallback.as_str()) {
+                (true, "hold") => Some(Command::HoldHere),
+                (true, "lawn") => Some(Command::GoTo(lawn.next_point())),
+                _ => match planner.plan(&pf, model.as_mut(), &agent, &world, &mut rng_guid) {
+                    Ok(dec) => {
+                        entropy = dec.h_now;
+                        last_eer = dec.eer;
+                        Some(Command::GoTo(dec.waypoint_enu))
+                    }
+                    Err(e) => {
+                        tracing::error!("guidance failed: {e}");
+                        None
+                    }
+                },
+            };
+            let ms = started.elapsed().as_secs_f64() * 1e3;
+            out.guidance_ms.push(ms);
+            if ms > d.guidance_budget_ms {
+                out.guidance_overruns += 1;
+                tracing::warn!(
+                    "guidance took {ms:.0} ms (budget {} ms): decision skipped",
+                    d.guidance_budget_ms
+                );
+                continue;
+            }
+            if let Some(c) = decided {
+                let c = match c {
+                    Command::GoTo(w) => Command::GoTo(world.workspace_enu.clamp(&w)),
+                    h => h,
+                };
+                command = Some(c);
+                out.latency_ms.push(last_frame_ms + ms);
+                *shared.command.lock().expect("shared poisoned") = Some(c);
+            }
+        }
+    }
+    out.vision = sensor.stats;
+    out
+}

@@ -1,0 +1,222 @@
+//! `infotrack run`: the daemon, and what it leaves behind (table, logs, plots).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+
+use infotrack::config::Config;
+use infotrack::daemon::{self, pipeline::FlightRecord, DaemonReport, RunOptions};
+use infotrack::report;
+use infotrack::world::World;
+
+/// Arguments of `infotrack run`.
+#[derive(clap::Args)]
+pub struct RunArgs {
+    /// Configuration file; without it, the embedded config/default.toml (simulated target,
+    /// synthetic camera, in-process mock PX4).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Seconds of tracking after takeoff (default: the config's timing.duration_s).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Folder for the logs (per-step CSV, MAVLink .tlog, plots, summary JSON).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Seed (default: the config's `seed`).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Motion model of the particle filter.
+    #[arg(long, default_value = "dmmn")]
+    motion: String,
+    /// The vehicle, overriding daemon.vehicle: mock:px4, mock:ardupilot or a MAVLink URL.
+    #[arg(long)]
+    vehicle: Option<String>,
+    /// No status line.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn percentile(v: &[f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(|a, b| a.total_cmp(b));
+    s[((s.len() - 1) as f64 * p).round() as usize]
+}
+
+fn flight_csv(records: &[FlightRecord]) -> String {
+    let mut s = String::from(
+        "t_s,vehicle_n_m,vehicle_e_m,vehicle_d_m,roll_rad,pitch_rad,yaw_rad,measured,meas_x_m,meas_y_m,est_x_m,est_y_m,cov_xx,cov_xy,cov_yy,n_eff,eer,state,command,cmd_x_m,cmd_y_m\n",
+    );
+    for r in records {
+        let (mx, my) = r
+            .step
+            .measurement_enu
+            .map_or((f64::NAN, f64::NAN), |z| (z.x, z.y));
+        let (cmd, cx, cy) = match r.command {
+            Some(daemon::pipeline::Command::GoTo(w)) => ("goto", w.x, w.y),
+            Some(daemon::pipeline::Command::HoldHere) => ("hold", f64::NAN, f64::NAN),
+            None => ("none", f64::NAN, f64::NAN),
+        };
+        let p = &r.pose;
+        let c = &r.step.cov_m2;
+        let _ = writeln!(
+            s,
+            "{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.6},{:.6},{:.6},{:.1},{:.4},{},{},{:.4},{:.4}",
+            r.step.t_s,
+            p.position_ned_m[0],
+            p.position_ned_m[1],
+            p.position_ned_m[2],
+            p.roll_rad,
+            p.pitch_rad,
+            p.yaw_rad,
+            r.step.measurement_enu.is_some() as u8,
+            mx,
+            my,
+            r.step.estimate_enu.x,
+            r.step.estimate_enu.y,
+            c[(0, 0)],
+            c[(0, 1)],
+            c[(1, 1)],
+            r.step.n_eff,
+            r.step.eer,
+            r.state.as_str(),
+            cmd,
+            cx,
+            cy
+        );
+    }
+    s
+}
+
+/// The results table of one daemon run.
+pub fn table(r: &DaemonReport, motion: &str) -> String {
+    let s = &r.summary;
+    let o = &r.output;
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "closed loop | {} mock-or-vehicle | motion {motion} | {} filter steps | stopped by {:?}",
+        r.flavor,
+        o.records.len(),
+        r.stopped_by
+    );
+    let _ = writeln!(
+        t,
+        "| tracking error (m) | estimation error (m) | det(cov) (m^4) | %FOV | frames with tag | guidance overruns | frame->setpoint p50/p99 (ms) |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        t,
+        "| {:.3} | {:.3} | {:.2e} | {:.1} | {}/{} | {} | {:.1} / {:.1} |",
+        s.tracking_error_m,
+        s.estimation_error_m,
+        s.cov_det,
+        s.fov_percent,
+        o.vision.detections,
+        o.vision.frames,
+        o.guidance_overruns,
+        percentile(&o.latency_ms, 0.5),
+        percentile(&o.latency_ms, 0.99)
+    );
+    let _ = writeln!(
+        t,
+        "vehicle: final mode {:?}; failsafe mode changes {:?}; link losses {}; setpoints refused by the geofence {}",
+        r.final_mode, r.unexpected_mode_changes, r.link_losses, r.geofence_refusals
+    );
+    t
+}
+
+/// Runs the daemon from the command line.
+pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
+    let mut cfg = match &a.config {
+        Some(p) => Config::load(p)?,
+        None => Config::default_lab(),
+    };
+    if let Some(v) = &a.vehicle {
+        cfg.daemon.vehicle = v.clone();
+        cfg.validate().with_context(|| format!("--vehicle `{v}`"))?;
+    }
+    let duration = a.duration.unwrap_or(cfg.timing.duration_s);
+    if !(duration.is_finite() && duration > 0.0) {
+        bail!("--duration must be a positive number of seconds, got {duration}");
+    }
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let opts = RunOptions {
+        duration_s: duration,
+        seed: a.seed.unwrap_or(cfg.seed),
+        motion: a.motion.clone(),
+        tlog: a.out.as_ref().map(|d| d.join("link.tlog")),
+        status_line: !a.quiet,
+    };
+    let cpu_before = cpu_seconds();
+    let wall = std::time::Instant::now();
+    let report = rt.block_on(daemon::run(&cfg, &opts))?;
+    let cpu = cpu_seconds() - cpu_before;
+    print!("{}", table(&report, &a.motion));
+    println!(
+        "resources: {:.0}% of one core over {:.1} s, peak resident memory {:.0} MB",
+        100.0 * cpu / wall.elapsed().as_secs_f64(),
+        wall.elapsed().as_secs_f64(),
+        peak_rss_mb()
+    );
+    if let Some(dir) = &a.out {
+        let steps: Vec<_> = report
+            .output
+            .records
+            .iter()
+            .map(|r| r.step.clone())
+            .collect();
+        report::csv::write(&dir.join("steps.csv"), &steps)?;
+        report::write_file(
+            &dir.join("flight.csv"),
+            flight_csv(&report.output.records).as_bytes(),
+        )?;
+        let world = World::from_config(&cfg);
+        report::plots::scene(
+            &dir.join("scene.png"),
+            &format!("{} | closed loop, {} guidance", cfg.name, "eer"),
+            &world,
+            &steps,
+            &[],
+        )?;
+        report::plots::estimation_error(
+            &dir.join("estimation_error.png"),
+            "closed loop: estimation error",
+            &steps,
+        )?;
+        report::write_json(&dir.join("summary.json"), &report.summary)?;
+        println!(
+            "wrote steps.csv, flight.csv, link.tlog, scene.png, estimation_error.png and summary.json to {}",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage fills the struct we own.
+    unsafe {
+        let mut u: libc::rusage = std::mem::zeroed();
+        if libc::getrusage(libc::RUSAGE_SELF, &mut u) != 0 {
+            return f64::NAN;
+        }
+        let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+        tv(u.ru_utime) + tv(u.ru_stime)
+    }
+}
+
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
