@@ -98,8 +98,9 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "closed loop | {} mock-or-vehicle | motion {motion} | {} filter steps | stopped by {:?}",
+        "closed loop | {} vehicle at {} | motion {motion} | {} filter steps | stopped by {:?}",
         r.flavor,
+        r.vehicle,
         o.records.len(),
         r.stopped_by
     );

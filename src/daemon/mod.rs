@@ -85,6 +85,8 @@ pub struct DaemonReport {
     pub geofence_refusals: u64,
     /// The firmware flown.
     pub flavor: Flavor,
+    /// Where it was reached (`mock:px4 via udpout:...` or the URL).
+    pub vehicle: String,
     /// The in-process mock, when the vehicle was one (for tests and fault injection).
     pub mock: Option<MockHandle>,
 }
@@ -332,6 +334,11 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         link_losses,
         geofence_refusals,
         flavor,
+        vehicle: if mock.is_some() {
+            format!("{} via {url}", d.vehicle)
+        } else {
+            url.clone()
+        },
         mock,
         output,
     })
