@@ -45,6 +45,8 @@ enum Command {
     /// The daemon: camera -> detector -> particle filter -> EER -> setpoints over MAVLink.
     /// The embedded default flies the simulated scenario through the mock autopilot.
     Run(run_cmd::RunArgs),
+    /// Re-run estimation and guidance on a recorded `infotrack run` flight and compare.
+    Replay(run_cmd::ReplayArgs),
 }
 
 #[derive(clap::Args)]
@@ -211,6 +213,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Sim(a) => sim(a),
         Command::Run(a) => runtime().and_then(|rt| run_cmd::run(a, rt)),
+        Command::Replay(a) => run_cmd::replay(a),
         Command::Bench(a) => bench(a),
         Command::Detect(a) => detect::run(a.path, a.json, a.pose, a.annotate, a.ids),
         Command::Dataset(a) => dataset(a),

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 
 use infotrack::config::Config;
-use infotrack::daemon::{self, pipeline::FlightRecord, DaemonReport, RunOptions};
+use infotrack::daemon::{self, flight_log, DaemonReport, RunOptions};
 use infotrack::report;
 use infotrack::world::World;
 
@@ -35,6 +35,11 @@ pub struct RunArgs {
     /// No status line.
     #[arg(long)]
     quiet: bool,
+    /// Inject a fault: KIND@START+DURATION in seconds after tracking starts, KIND one of
+    /// camera-freeze, link-cut, loss=PERCENT (the last two need the in-process mock).
+    /// Repeatable.
+    #[arg(long)]
+    inject: Vec<daemon::ScheduledFault>,
 }
 
 fn percentile(v: &[f64], p: f64) -> f64 {
@@ -44,51 +49,6 @@ fn percentile(v: &[f64], p: f64) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(|a, b| a.total_cmp(b));
     s[((s.len() - 1) as f64 * p).round() as usize]
-}
-
-fn flight_csv(records: &[FlightRecord]) -> String {
-    let mut s = String::from(
-        "t_s,vehicle_n_m,vehicle_e_m,vehicle_d_m,roll_rad,pitch_rad,yaw_rad,measured,meas_x_m,meas_y_m,est_x_m,est_y_m,cov_xx,cov_xy,cov_yy,n_eff,eer,state,command,cmd_x_m,cmd_y_m\n",
-    );
-    for r in records {
-        let (mx, my) = r
-            .step
-            .measurement_enu
-            .map_or((f64::NAN, f64::NAN), |z| (z.x, z.y));
-        let (cmd, cx, cy) = match r.command {
-            Some(daemon::pipeline::Command::GoTo(w)) => ("goto", w.x, w.y),
-            Some(daemon::pipeline::Command::HoldHere) => ("hold", f64::NAN, f64::NAN),
-            None => ("none", f64::NAN, f64::NAN),
-        };
-        let p = &r.pose;
-        let c = &r.step.cov_m2;
-        let _ = writeln!(
-            s,
-            "{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.6},{:.6},{:.6},{:.1},{:.4},{},{},{:.4},{:.4}",
-            r.step.t_s,
-            p.position_ned_m[0],
-            p.position_ned_m[1],
-            p.position_ned_m[2],
-            p.roll_rad,
-            p.pitch_rad,
-            p.yaw_rad,
-            r.step.measurement_enu.is_some() as u8,
-            mx,
-            my,
-            r.step.estimate_enu.x,
-            r.step.estimate_enu.y,
-            c[(0, 0)],
-            c[(0, 1)],
-            c[(1, 1)],
-            r.step.n_eff,
-            r.step.eer,
-            r.state.as_str(),
-            cmd,
-            cx,
-            cy
-        );
-    }
-    s
 }
 
 /// The results table of one daemon run.
@@ -124,8 +84,8 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
     );
     let _ = writeln!(
         t,
-        "vehicle: final mode {:?}; failsafe mode changes {:?}; link losses {}; setpoints refused by the geofence {}",
-        r.final_mode, r.unexpected_mode_changes, r.link_losses, r.geofence_refusals
+        "vehicle: final mode {:?}; failsafe mode changes {:?}; link losses {}; setpoints refused by the geofence {}; filter periods without a camera frame {}",
+        r.final_mode, r.unexpected_mode_changes, r.link_losses, r.geofence_refusals, o.frames_missed
     );
     t
 }
@@ -153,6 +113,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         motion: a.motion.clone(),
         tlog: a.out.as_ref().map(|d| d.join("link.tlog")),
         status_line: !a.quiet,
+        faults: a.inject.clone(),
     };
     let cpu_before = cpu_seconds();
     let wall = std::time::Instant::now();
@@ -175,7 +136,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         report::csv::write(&dir.join("steps.csv"), &steps)?;
         report::write_file(
             &dir.join("flight.csv"),
-            flight_csv(&report.output.records).as_bytes(),
+            flight_log::render(&report.output.records, opts.seed, &a.motion).as_bytes(),
         )?;
         let world = World::from_config(&cfg);
         report::plots::scene(
@@ -220,4 +181,49 @@ fn peak_rss_mb() -> f64 {
                 .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
         })
         .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// Arguments of `infotrack replay`.
+#[derive(clap::Args)]
+pub struct ReplayArgs {
+    /// The `--out` folder of an `infotrack run` (its flight.csv is read).
+    dir: PathBuf,
+    /// The configuration the flight used (default: the embedded config/default.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+/// Re-runs estimation and guidance on a recorded flight and compares.
+pub fn replay(a: ReplayArgs) -> Result<()> {
+    let cfg = match &a.config {
+        Some(p) => Config::load(p)?,
+        None => Config::default_lab(),
+    };
+    let path = a.dir.join("flight.csv");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let (seed, motion, steps) = flight_log::parse(&text, &path.display().to_string())?;
+    let r = daemon::replay::replay(&cfg, &motion, seed, &steps)?;
+    println!(
+        "replayed {} filter steps of {} (seed {seed}, motion {motion})",
+        r.steps,
+        path.display()
+    );
+    println!(
+        "estimates: largest difference from the flight {:.3e} m ({})",
+        r.max_estimate_diff_m,
+        if r.max_estimate_diff_m == 0.0 {
+            "identical"
+        } else {
+            "NOT identical: different config, model or build?"
+        }
+    );
+    println!(
+        "guidance re-decided after each step: mean distance to the waypoint flown {:.3} m over {} steps",
+        r.mean_waypoint_diff_m, r.waypoints_compared
+    );
+    if r.max_estimate_diff_m != 0.0 {
+        bail!("the replayed estimates differ from the flight's");
+    }
+    Ok(())
 }

@@ -25,6 +25,7 @@ fn opts(duration_s: f64, tlog: Option<std::path::PathBuf>) -> RunOptions {
         motion: "dmmn".into(),
         tlog,
         status_line: false,
+        faults: vec![],
     }
 }
 
@@ -99,6 +100,22 @@ async fn px4_closed_loop_through_the_mock() {
     assert!(msgs
         .iter()
         .any(|(_, h, m)| h.component_id == 191 && matches!(m, MavMessage::HEARTBEAT(_))));
+    replays_exactly(&cfg, &r);
+}
+
+/// The flight log replays to the same estimates, bit for bit.
+fn replays_exactly(cfg: &Config, r: &daemon::DaemonReport) {
+    use infotrack::daemon::{flight_log, replay};
+    let text = flight_log::render(&r.output.records, 7, "dmmn");
+    let (seed, motion, steps) = flight_log::parse(&text, "flight.csv").unwrap();
+    assert_eq!(
+        (seed, motion.as_str(), steps.len()),
+        (7, "dmmn", r.output.records.len())
+    );
+    let rep = replay::replay(cfg, &motion, seed, &steps).unwrap();
+    assert_eq!(rep.max_estimate_diff_m, 0.0);
+    assert!(rep.waypoints_compared > 10);
+    assert!(rep.mean_waypoint_diff_m.is_finite());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -111,51 +128,71 @@ async fn ardupilot_closed_loop_through_the_mock() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn link_cut_and_packet_loss_inside_the_loop_are_survived() {
-    let port = free_udp_port();
-    let mut mc = MockConfig::new(Flavor::Px4);
-    mc.param_overrides = vec![("MPC_XY_VEL_MAX".into(), 1.0), ("MPC_ACC_HOR".into(), 2.0)];
-    let mock = spawn(&format!("udpin:127.0.0.1:{port}"), mc, Faults::default())
-        .await
-        .unwrap();
-    let mut cfg = lab();
-    cfg.daemon.vehicle = format!("udpout:127.0.0.1:{port}");
-    let run = tokio::spawn(async move { daemon::run(&cfg, &opts(30.0, None)).await });
-    // Airborne and tracking after the takeoff (~3 s); then 30% loss, then a 5 s cut.
-    tokio::time::sleep(Duration::from_secs(10)).await;
-    mock.set_faults(Faults {
-        loss_percent: 30.0,
-        seed: 1,
-        ..Faults::default()
-    });
-    tokio::time::sleep(Duration::from_secs(5)).await;
-    mock.set_faults(Faults::default());
-    mock.cut_link(Duration::from_secs(5));
-    let r = run.await.unwrap().unwrap();
-    assert!(r.link_losses >= 1, "the cut was not noticed");
-    // PX4's offboard failsafe fired during the cut and the vehicle came back to OFFBOARD
-    // by itself once setpoints resumed; tracking went on to the end.
-    assert!(r
-        .unexpected_mode_changes
+async fn packet_loss_link_cut_and_camera_freeze_inside_the_loop_are_survived() {
+    use infotrack::daemon::pipeline::{Command as Cmd, TrackState};
+    let cfg = lab();
+    let mut o = opts(34.0, None);
+    o.faults = ["loss=30@5+5", "link-cut@12+5", "camera-freeze@21+5"]
         .iter()
-        .any(|(from, _)| *from == Mode::Offboard));
-    let records = &r.output.records;
-    assert!(records
-        .iter()
-        .any(|x| x.state == infotrack::daemon::pipeline::TrackState::LinkLost));
-    let last_10s: Vec<_> = records
-        .iter()
-        .filter(|x| x.step.t_s > records.last().unwrap().step.t_s - 8.0)
+        .map(|f| f.parse().unwrap())
         .collect();
-    assert!(last_10s
-        .iter()
-        .all(|x| x.state != infotrack::daemon::pipeline::TrackState::LinkLost));
+    let r = daemon::run(&cfg, &o).await.unwrap();
+    let records = &r.output.records;
+    let during = |a: f64, b: f64| {
+        records
+            .iter()
+            .filter(move |x| x.step.t_s >= a && x.step.t_s < b)
+    };
+    // The cut: the link noticed, no commands on stale state, PX4's offboard failsafe fired
+    // and PX4 went back to OFFBOARD by itself when setpoints resumed.
+    assert!(r.link_losses >= 1, "the cut was not noticed");
+    assert!(during(12.0, 18.0).any(|x| x.state == TrackState::LinkLost));
     assert!(
-        last_10s.iter().any(|x| x.step.measurement_enu.is_some()),
+        r.unexpected_mode_changes
+            .iter()
+            .any(|(from, _)| *from == Mode::Offboard),
+        "{:?}",
+        r.unexpected_mode_changes
+    );
+    // The frozen camera: missed frames, hold, no negative information from images never taken.
+    assert!(r.output.frames_missed >= 12, "{}", r.output.frames_missed);
+    let frozen: Vec<_> = during(22.5, 26.0).collect();
+    assert!(frozen
+        .iter()
+        .all(|x| x.state == TrackState::CameraLost && x.step.measurement_enu.is_none()));
+    assert!(frozen.iter().any(|x| x.command == Some(Cmd::HoldHere)));
+    // Afterwards: tracking again, frames and measurements, to the end.
+    let after: Vec<_> = during(28.0, 40.0).collect();
+    assert!(after
+        .iter()
+        .all(|x| x.state != TrackState::CameraLost && x.state != TrackState::LinkLost));
+    assert!(
+        after.iter().any(|x| x.step.measurement_enu.is_some()),
         "tracking did not resume"
     );
     assert_eq!(r.final_mode, Some(Mode::Hold));
-    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+    assert_eq!(r.mock.as_ref().unwrap().with(|m| m.mode()), Mode::Hold);
+    // Blind steps (no frame) replay too.
+    assert!(r.output.records.iter().any(|x| !x.frame));
+    replays_exactly(&cfg, &r);
+}
+
+#[test]
+fn fault_specs_parse_with_clear_errors() {
+    use infotrack::daemon::{FaultKind, ScheduledFault};
+    let f: ScheduledFault = "loss=30@5+2.5".parse().unwrap();
+    assert_eq!(f.kind, FaultKind::PacketLoss(30.0));
+    assert_eq!((f.at_s, f.duration_s), (5.0, 2.5));
+    for bad in [
+        "camera-freeze",
+        "link-cut@5",
+        "loss=130@1+1",
+        "meteor@1+1",
+        "link-cut@-1+2",
+    ] {
+        let e = bad.parse::<ScheduledFault>().unwrap_err();
+        assert!(e.contains("KIND@START+DURATION"), "{bad}: {e}");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

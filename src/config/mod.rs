@@ -113,6 +113,8 @@ pub struct DaemonConfig {
     pub target_lost_fallback: String,
     /// A guidance decision that takes longer than this is not applied and is counted, ms.
     pub guidance_budget_ms: f64,
+    /// No camera frame for this long: hold position and report, s.
+    pub camera_timeout_s: f64,
     /// MAVLink 2 signing key file (64 hex digits); none: unsigned.
     pub signing_key: Option<PathBuf>,
 }
@@ -130,6 +132,7 @@ impl Default for DaemonConfig {
             target_lost_after_s: 10.0,
             target_lost_fallback: "eer".into(),
             guidance_budget_ms: 300.0,
+            camera_timeout_s: 1.0,
             signing_key: None,
         }
     }

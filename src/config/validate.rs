@@ -423,6 +423,7 @@ fn validate_daemon(c: &Config) -> Result<(), ConfigError> {
     positive("daemon.takeoff_timeout_s", d.takeoff_timeout_s)?;
     positive("daemon.target_lost_after_s", d.target_lost_after_s)?;
     positive("daemon.guidance_budget_ms", d.guidance_budget_ms)?;
+    positive("daemon.camera_timeout_s", d.camera_timeout_s)?;
     if !["eer", "lawn", "hold"].contains(&d.target_lost_fallback.as_str()) {
         return Err(invalid(
             "daemon.target_lost_fallback",

@@ -10,9 +10,11 @@
 //! MAVLink over loopback UDP, and the camera is the synthetic one.
 //!
 //! Not built yet: a simulated clock (the loop runs on the wall clock, so 90 s of flight take
-//! 90 s), real camera capture in the daemon, and `infotrack replay`.
+//! 90 s) and real camera capture in the daemon.
 
+pub mod flight_log;
 pub mod pipeline;
+pub mod replay;
 
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
@@ -56,6 +58,61 @@ pub struct RunOptions {
     pub tlog: Option<PathBuf>,
     /// Print the status line every second on stderr.
     pub status_line: bool,
+    /// Faults to inject during the flight (tests, demonstrations).
+    pub faults: Vec<ScheduledFault>,
+}
+
+/// A fault the daemon injects into its own loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FaultKind {
+    /// The camera delivers no frames.
+    CameraFreeze,
+    /// The MAVLink link is cut both ways (in-process mock only).
+    LinkCut,
+    /// This share of MAVLink messages is lost, percent (in-process mock only).
+    PacketLoss(f64),
+}
+
+/// A fault from `at_s` (seconds after tracking starts) for `duration_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScheduledFault {
+    /// What.
+    pub kind: FaultKind,
+    /// When it starts, s after tracking starts.
+    pub at_s: f64,
+    /// How long it lasts, s.
+    pub duration_s: f64,
+}
+
+impl std::str::FromStr for ScheduledFault {
+    type Err = String;
+
+    /// `camera-freeze@20+5`, `link-cut@40+5`, `loss=30@10+5` (KIND@START+DURATION, seconds).
+    fn from_str(s: &str) -> Result<Self, String> {
+        let usage = || {
+            format!("`{s}`: expected KIND@START+DURATION (seconds), KIND one of camera-freeze, link-cut, loss=PERCENT; e.g. camera-freeze@20+5")
+        };
+        let (kind, when) = s.split_once('@').ok_or_else(usage)?;
+        let (at, dur) = when.split_once('+').ok_or_else(usage)?;
+        let at_s: f64 = at.parse().map_err(|_| usage())?;
+        let duration_s: f64 = dur.parse().map_err(|_| usage())?;
+        if !(at_s.is_finite() && at_s >= 0.0 && duration_s.is_finite() && duration_s > 0.0) {
+            return Err(usage());
+        }
+        let kind = match kind {
+            "camera-freeze" => FaultKind::CameraFreeze,
+            "link-cut" => FaultKind::LinkCut,
+            k => match k.strip_prefix("loss=").map(str::parse::<f64>) {
+                Some(Ok(p)) if (0.0..=100.0).contains(&p) => FaultKind::PacketLoss(p),
+                _ => return Err(usage()),
+            },
+        };
+        Ok(Self {
+            kind,
+            at_s,
+            duration_s,
+        })
+    }
 }
 
 /// Why the loop ended.
@@ -200,6 +257,17 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         }
         url => (None, url.to_string()),
     };
+    if mock.is_none()
+        && opts
+            .faults
+            .iter()
+            .any(|f| !matches!(f.kind, FaultKind::CameraFreeze))
+    {
+        return Err(DaemonError::Setup(
+            "link faults can be injected only into the in-process mock (mock:px4, mock:ardupilot)"
+                .into(),
+        ));
+    }
     let mut lc = LinkConfig::new(&url);
     lc.system_id = d.system_id;
     lc.component_id = d.component_id;
@@ -246,6 +314,7 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
     let mut geofence_refusals = 0u64;
     let mut link_losses = 0u32;
     let mut was_lost = false;
+    let mut fault_active = vec![false; opts.faults.len()];
     let stopped_by = loop {
         tokio::select! {
             _ = &mut signal => break StopReason::Signal,
@@ -253,6 +322,27 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         }
         if began.elapsed().as_secs_f64() >= opts.duration_s {
             break StopReason::Duration;
+        }
+        let now_s = began.elapsed().as_secs_f64();
+        for (f, active) in opts.faults.iter().zip(fault_active.iter_mut()) {
+            let on = now_s >= f.at_s && now_s < f.at_s + f.duration_s;
+            if on == *active {
+                continue;
+            }
+            *active = on;
+            tracing::warn!("fault {:?} {}", f.kind, if on { "begins" } else { "ends" });
+            match (f.kind, mock.as_ref()) {
+                (FaultKind::CameraFreeze, _) => shared.camera_frozen.store(on, Ordering::Relaxed),
+                (FaultKind::LinkCut, Some(m)) if on => {
+                    m.cut_link(Duration::from_secs_f64(f.duration_s))
+                }
+                (FaultKind::PacketLoss(p), Some(m)) => m.set_faults(Faults {
+                    loss_percent: if on { p } else { 0.0 },
+                    seed: opts.seed,
+                    ..Faults::default()
+                }),
+                _ => {}
+            }
         }
         let snap = snapshot(&link);
         *shared.vehicle.lock().expect("shared poisoned") = snap;

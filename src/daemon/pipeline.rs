@@ -47,6 +47,8 @@ pub enum TrackState {
     Lost,
     /// No fresh vehicle state: no new commands.
     LinkLost,
+    /// No camera frames for the camera timeout: hold and report.
+    CameraLost,
 }
 
 impl TrackState {
@@ -56,6 +58,7 @@ impl TrackState {
             Self::Tracking => "tracking",
             Self::Lost => "lost",
             Self::LinkLost => "link-lost",
+            Self::CameraLost => "camera-lost",
         }
     }
 }
@@ -85,6 +88,8 @@ pub struct Shared {
     pub status: Mutex<Option<Status>>,
     /// Ask the pipeline to finish.
     pub stop: AtomicBool,
+    /// The camera delivers nothing while set (fault injection: a frozen camera).
+    pub camera_frozen: AtomicBool,
 }
 
 impl Shared {
@@ -95,6 +100,7 @@ impl Shared {
             command: Mutex::new(None),
             status: Mutex::new(None),
             stop: AtomicBool::new(false),
+            camera_frozen: AtomicBool::new(false),
         })
     }
 }
@@ -108,6 +114,8 @@ pub struct FlightRecord {
     pub pose: VehiclePoseNed,
     /// Tracking state.
     pub state: TrackState,
+    /// Whether a camera frame was taken at this step.
+    pub frame: bool,
     /// The command in force after this step.
     pub command: Option<Command>,
 }
@@ -129,6 +137,8 @@ pub struct PipelineOutput {
     pub guidance_overruns: u64,
     /// Frame statistics.
     pub vision: VisionStats,
+    /// Filter periods without a camera frame.
+    pub frames_missed: u64,
 }
 
 /// Messages from the pipeline thread before it runs.
@@ -186,6 +196,7 @@ pub fn run(
     let mut out = PipelineOutput::default();
     let (mut next_filter, mut next_guid) = (1u64, 1u64);
     let mut last_seen_s = 0.0;
+    let mut last_frame_s = 0.0;
     let mut last_pose: Option<VehiclePoseNed> = None;
     let mut last_frame_ms = 0.0;
     let mut entropy = f64::NAN;
@@ -217,20 +228,33 @@ pub fn run(
             let truth = target.position_enu;
             let started = Instant::now();
             let frame_seed = rand::Rng::gen(&mut rng_meas);
-            let z = match sensor.measure(
-                &agent,
-                &truth,
-                target.heading_enu_rad,
-                Some((pf.mean(), pf.covariance())),
-                frame_seed,
-            ) {
-                Ok(z) => z,
-                Err(e) => {
-                    tracing::warn!("camera frame dropped: {e}");
-                    None
+            let frozen = shared.camera_frozen.load(Ordering::Relaxed);
+            let z = if frozen {
+                out.frames_missed += 1;
+                None
+            } else {
+                last_frame_s = t;
+                match sensor.measure(
+                    &agent,
+                    &truth,
+                    target.heading_enu_rad,
+                    Some((pf.mean(), pf.covariance())),
+                    frame_seed,
+                ) {
+                    Ok(z) => z,
+                    Err(e) => {
+                        tracing::warn!("camera frame dropped: {e}");
+                        None
+                    }
                 }
             };
-            let n_eff = match pf.step(model.as_mut(), z, &agent, &world, &mut rng_filter) {
+            // Without a frame nothing was looked at: predict only, no negative information.
+            let stepped = if frozen {
+                pf.step_blind(model.as_mut(), &mut rng_filter)
+            } else {
+                pf.step(model.as_mut(), z, &agent, &world, &mut rng_filter)
+            };
+            let n_eff = match stepped {
                 Ok(r) => r.n_eff,
                 Err(e) => {
                     tracing::error!("filter step failed: {e}");
@@ -245,6 +269,14 @@ pub fn run(
             }
             state = if link_lost {
                 TrackState::LinkLost
+            } else if t - last_frame_s > d.camera_timeout_s {
+                if state != TrackState::CameraLost {
+                    tracing::error!(
+                        "camera: no frame for {} s; holding position",
+                        d.camera_timeout_s
+                    );
+                }
+                TrackState::CameraLost
             } else if t - last_seen_s > d.target_lost_after_s {
                 TrackState::Lost
             } else {
@@ -269,6 +301,7 @@ pub fn run(
                 },
                 pose,
                 state,
+                frame: !frozen,
                 command,
             });
             *shared.status.lock().expect("shared poisoned") = Some(Status {
@@ -289,6 +322,7 @@ pub fn run(
             let started = Instant::now();
             let fallback = state == TrackState::Lost;
             let decided = match (fallback, d.target_lost_fallback.as_str()) {
+                _ if state == TrackState::CameraLost => Some(Command::HoldHere),
                 (true, "hold") => Some(Command::HoldHere),
                 (true, "lawn") => Some(Command::GoTo(lawn.next_point())),
                 _ => match planner.plan(&pf, model.as_mut(), &agent, &world, &mut rng_guid) {

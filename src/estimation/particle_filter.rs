@@ -288,6 +288,25 @@ impl ParticleFilter {
         })
     }
 
+    /// One filter period in which the camera did not look (no frame: a frozen or lost
+    /// camera): predict only. No negative information is applied and nothing is resampled,
+    /// since no image ruled anything out.
+    pub fn step_blind<R: Rng + ?Sized>(
+        &mut self,
+        model: &mut dyn MotionModel,
+        rng: &mut R,
+    ) -> Result<StepReport, FilterError> {
+        self.step_index += 1;
+        self.counters.steps += 1;
+        let nonfinite = self.predict(model, rng)?;
+        Ok(StepReport {
+            measured: false,
+            n_eff: self.n_eff(),
+            action: ResampleAction::None,
+            nonfinite_predictions: nonfinite,
+        })
+    }
+
     /// Prediction through the model, then N(0, 2Q). Returns how many outputs were rejected.
     fn predict<R: Rng + ?Sized>(
         &mut self,

@@ -255,3 +255,21 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_blind_step_predicts_without_negative_information() {
+    let (c, world, mut pf, mut rng) = setup(2000);
+    let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
+    let agent = Enu2::new(-2.0, 1.5); // away from occlusions
+    let before = mass_inside(&pf, &world, &agent);
+    let weights = pf.weights().to_vec();
+    let r = pf.step_blind(&mut model, &mut rng).unwrap();
+    assert!(!r.measured);
+    assert_eq!(pf.weights(), weights.as_slice(), "weights untouched");
+    // Particles moved (prediction ran), but the footprint kept its share of the mass,
+    // unlike a step with no measurement (negative information).
+    let blind = mass_inside(&pf, &world, &agent);
+    assert!((blind - before).abs() < 0.05, "{before} -> {blind}");
+    pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+    assert!(mass_inside(&pf, &world, &agent) < 0.5 * blind);
+}

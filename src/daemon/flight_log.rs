@@ -1,0 +1,196 @@
+//! The daemon's per-step flight log (`flight.csv`): everything the pipeline consumed
+//! (vehicle pose, whether a frame was taken, the measurement) at full precision, and what it
+//! decided, so that `infotrack replay` can re-run estimation and guidance on it exactly.
+//!
+//! A first comment line carries the seed and the motion model: `# infotrack flight log
+//! seed=7 motion=dmmn`.
+
+use std::fmt::Write as _;
+
+use thiserror::Error;
+
+use super::pipeline::{Command, FlightRecord};
+use crate::world::geometry::Enu2;
+
+/// The header row.
+pub const HEADER: &str = "t_s,vehicle_n_m,vehicle_e_m,vehicle_d_m,roll_rad,pitch_rad,yaw_rad,frame,measured,meas_x_m,meas_y_m,est_x_m,est_y_m,cov_xx,cov_xy,cov_yy,n_eff,eer,state,command,cmd_x_m,cmd_y_m";
+
+/// A flight log that cannot be read.
+#[derive(Debug, Error)]
+#[error("{path}, line {line}: {message}")]
+pub struct FlightLogError {
+    /// The file.
+    pub path: String,
+    /// 1-based line.
+    pub line: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// One logged filter step, as replay needs it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoggedStep {
+    /// Time since tracking started, s.
+    pub t_s: f64,
+    /// Vehicle position, world ENU, m.
+    pub vehicle_enu: Enu2,
+    /// Whether a camera frame was taken (false: the camera gave nothing).
+    pub frame: bool,
+    /// The measurement, world ENU, m.
+    pub measurement_enu: Option<Enu2>,
+    /// The estimate the flight had after this step, world ENU, m.
+    pub estimate_enu: Enu2,
+    /// The waypoint in force after this step, world ENU, m (None: none or hold).
+    pub command_enu: Option<Enu2>,
+}
+
+/// Writes the log. Inputs are written with Rust's shortest round-trip formatting, so that
+/// replay reads back exactly the numbers the filter saw.
+pub fn render(records: &[FlightRecord], seed: u64, motion: &str) -> String {
+    let mut s = format!("# infotrack flight log seed={seed} motion={motion}\n{HEADER}\n");
+    for r in records {
+        let (mx, my) = r
+            .step
+            .measurement_enu
+            .map_or((f64::NAN, f64::NAN), |z| (z.x, z.y));
+        let (cmd, cx, cy) = match r.command {
+            Some(Command::GoTo(w)) => ("goto", w.x, w.y),
+            Some(Command::HoldHere) => ("hold", f64::NAN, f64::NAN),
+            None => ("none", f64::NAN, f64::NAN),
+        };
+        let p = &r.pose;
+        let c = &r.step.cov_m2;
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            r.step.t_s,
+            p.position_ned_m[0],
+            p.position_ned_m[1],
+            p.position_ned_m[2],
+            p.roll_rad,
+            p.pitch_rad,
+            p.yaw_rad,
+            r.frame as u8,
+            r.step.measurement_enu.is_some() as u8,
+            mx,
+            my,
+            r.step.estimate_enu.x,
+            r.step.estimate_enu.y,
+            c[(0, 0)],
+            c[(0, 1)],
+            c[(1, 1)],
+            r.step.n_eff,
+            r.step.eer,
+            r.state.as_str(),
+            cmd,
+            cx,
+            cy
+        );
+    }
+    s
+}
+
+/// Reads a log: the seed and motion model from its first line, and the steps.
+pub fn parse(text: &str, path: &str) -> Result<(u64, String, Vec<LoggedStep>), FlightLogError> {
+    let err = |line: usize, message: String| FlightLogError {
+        path: path.to_string(),
+        line,
+        message,
+    };
+    let mut lines = text.lines().enumerate();
+    let (_, first) = lines.next().ok_or_else(|| err(1, "empty file".into()))?;
+    let meta = first
+        .strip_prefix("# infotrack flight log ")
+        .ok_or_else(|| {
+            err(
+                1,
+                "not an infotrack flight log (no `# infotrack flight log` line)".into(),
+            )
+        })?;
+    let mut seed = None;
+    let mut motion = None;
+    for kv in meta.split_whitespace() {
+        match kv.split_once('=') {
+            Some(("seed", v)) => seed = v.parse().ok(),
+            Some(("motion", v)) => motion = Some(v.to_string()),
+            _ => {}
+        }
+    }
+    let seed = seed.ok_or_else(|| err(1, "no seed=N".into()))?;
+    let motion = motion.ok_or_else(|| err(1, "no motion=NAME".into()))?;
+    match lines.next() {
+        Some((_, h)) if h == HEADER => {}
+        _ => return Err(err(2, format!("expected the header `{HEADER}`"))),
+    }
+    let mut steps = Vec::new();
+    for (i, line) in lines {
+        let n = i + 1;
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != 22 {
+            return Err(err(n, format!("{} fields, expected 22", f.len())));
+        }
+        let num = |k: usize| -> Result<f64, FlightLogError> {
+            f[k].parse::<f64>()
+                .map_err(|_| err(n, format!("field {} `{}` is not a number", k + 1, f[k])))
+        };
+        let flag = |k: usize| -> Result<bool, FlightLogError> {
+            match f[k] {
+                "0" => Ok(false),
+                "1" => Ok(true),
+                v => Err(err(n, format!("field {} `{v}` must be 0 or 1", k + 1))),
+            }
+        };
+        let measured = flag(8)?;
+        let z = Enu2::new(num(9)?, num(10)?);
+        if measured && !(z.x.is_finite() && z.y.is_finite()) {
+            return Err(err(n, "measured, but the measurement is not finite".into()));
+        }
+        let cmd = match f[19] {
+            "goto" => Some(Enu2::new(num(20)?, num(21)?)),
+            "hold" | "none" => None,
+            v => return Err(err(n, format!("command `{v}` is not goto, hold or none"))),
+        };
+        steps.push(LoggedStep {
+            t_s: num(0)?,
+            // NED (north, east) -> ENU (east, north).
+            vehicle_enu: Enu2::new(num(2)?, num(1)?),
+            frame: flag(7)?,
+            measurement_enu: measured.then_some(z),
+            estimate_enu: Enu2::new(num(11)?, num(12)?),
+            command_enu: cmd,
+        });
+    }
+    Ok((seed, motion, steps))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_logs_name_the_line() {
+        let ok_head = format!("# infotrack flight log seed=3 motion=cv\n{HEADER}\n");
+        let (seed, motion, steps) = parse(&ok_head, "f").unwrap();
+        assert_eq!((seed, motion.as_str(), steps.len()), (3, "cv", 0));
+        let e = parse("t_s,x\n", "f.csv").unwrap_err().to_string();
+        assert!(
+            e.contains("f.csv, line 1") && e.contains("not an infotrack flight log"),
+            "{e}"
+        );
+        let row =
+            "0.33,1,2,-1.2,0,0,0,1,1,0.5,0.6,0.5,0.6,0.01,0,0.01,400,0.1,tracking,goto,0.5,0.7";
+        let (_, _, steps) = parse(&format!("{ok_head}{row}\n"), "f").unwrap();
+        assert_eq!(steps[0].vehicle_enu, Enu2::new(2.0, 1.0), "NED -> ENU");
+        assert_eq!(steps[0].measurement_enu, Some(Enu2::new(0.5, 0.6)));
+        assert_eq!(steps[0].command_enu, Some(Enu2::new(0.5, 0.7)));
+        let bad = row.replace(",1,1,0.5", ",2,1,0.5");
+        let e = parse(&format!("{ok_head}{bad}\n"), "f")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3") && e.contains("0 or 1"), "{e}");
+        let e = parse(&format!("{ok_head}1,2\n"), "f")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3") && e.contains("2 fields"), "{e}");
+    }
+}
