@@ -17,7 +17,8 @@ pub struct RunArgs {
     /// synthetic camera, in-process mock PX4).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Seconds of tracking after takeoff (default: the config's timing.duration_s).
+    /// Seconds of tracking after takeoff (default: the config's timing.duration_s); 0: until
+    /// SIGINT/SIGTERM.
     #[arg(long)]
     duration: Option<f64>,
     /// Folder for the logs (per-step CSV, MAVLink .tlog, plots, summary JSON).
@@ -26,9 +27,9 @@ pub struct RunArgs {
     /// Seed (default: the config's `seed`).
     #[arg(long)]
     seed: Option<u64>,
-    /// Motion model of the particle filter.
-    #[arg(long, default_value = "dmmn")]
-    motion: String,
+    /// Motion model of the particle filter (default: the config's daemon.motion, `dmmn`).
+    #[arg(long)]
+    motion: Option<String>,
     /// The vehicle, overriding daemon.vehicle: mock:px4, mock:ardupilot or a MAVLink URL.
     #[arg(long)]
     vehicle: Option<String>,
@@ -69,6 +70,12 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
         "| tracking error (m) | estimation error (m) | det(cov) (m^4) | %FOV | frames with tag | guidance overruns | frame->setpoint p50/p99 (ms) |"
     );
     let _ = writeln!(t, "|---|---|---|---|---|---|---|");
+    if s.tracking_error_m.is_nan() {
+        let _ = writeln!(
+            t,
+            "(real camera: no ground truth, so no tracking/estimation error or %FOV)"
+        );
+    }
     let _ = writeln!(
         t,
         "| {:.3} | {:.3} | {:.2e} | {:.1} | {}/{} | {} | {:.1} / {:.1} |",
@@ -101,16 +108,26 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         cfg.validate().with_context(|| format!("--vehicle `{v}`"))?;
     }
     let duration = a.duration.unwrap_or(cfg.timing.duration_s);
-    if !(duration.is_finite() && duration > 0.0) {
-        bail!("--duration must be a positive number of seconds, got {duration}");
+    if !(duration.is_finite() && duration >= 0.0) {
+        bail!("--duration must be a number of seconds >= 0 (0: until stopped), got {duration}");
     }
+    let duration = if duration == 0.0 {
+        f64::INFINITY
+    } else {
+        duration
+    };
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
+    if let Some(m) = &a.motion {
+        cfg.daemon.motion = m.clone();
+        cfg.validate().with_context(|| format!("--motion `{m}`"))?;
+    }
+    let motion = cfg.daemon.motion.clone();
     let opts = RunOptions {
         duration_s: duration,
         seed: a.seed.unwrap_or(cfg.seed),
-        motion: a.motion.clone(),
+        motion: motion.clone(),
         tlog: a.out.as_ref().map(|d| d.join("link.tlog")),
         status_line: !a.quiet,
         faults: a.inject.clone(),
@@ -119,7 +136,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
     let wall = std::time::Instant::now();
     let report = rt.block_on(daemon::run(&cfg, &opts))?;
     let cpu = cpu_seconds() - cpu_before;
-    print!("{}", table(&report, &a.motion));
+    print!("{}", table(&report, &motion));
     println!(
         "resources: {:.0}% of one core over {:.1} s, peak resident memory {:.0} MB",
         100.0 * cpu / wall.elapsed().as_secs_f64(),
@@ -136,7 +153,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         report::csv::write(&dir.join("steps.csv"), &steps)?;
         report::write_file(
             &dir.join("flight.csv"),
-            flight_log::render(&report.output.records, opts.seed, &a.motion).as_bytes(),
+            flight_log::render(&report.output.records, opts.seed, &motion).as_bytes(),
         )?;
         let world = World::from_config(&cfg);
         report::plots::scene(

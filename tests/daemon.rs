@@ -284,3 +284,145 @@ fn bad_starts_give_clear_errors() {
     let e = run(&["--config", cfg.to_str().unwrap()]);
     assert!(e.contains("no autopilot heartbeat"), "{e}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_real_camera_source_is_projected_with_the_pose_at_capture_time() {
+    use infotrack::daemon::pipeline::TrackState;
+    use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
+    use infotrack::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
+    use infotrack::vision::{cv_io, tag_family::TagBitmap};
+    use opencv::prelude::*;
+    // A camera that films a tag at (0.1, 0.15) m ENU from where the vehicle will hover:
+    // (0, 0) at the agent's 1.2 m, nose east (PX4 holds the yaw of the setpoints, ENU 0).
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = lab();
+    let intr = Intrinsics::ideal(640, 480, cfg.camera.fov_x_rad);
+    let calib = dir.path().join("camera.yaml");
+    cv_io::save_calibration(&calib, &intr).unwrap();
+    let cam = CameraModel {
+        intrinsics: intr,
+        mount: CameraMount::nadir(),
+    };
+    let pose = VehiclePoseNed {
+        position_ned_m: [0.0, 0.0, -cfg.agent.altitude_m],
+        roll_rad: 0.0,
+        pitch_rad: 0.0,
+        yaw_rad: std::f64::consts::FRAC_PI_2,
+    };
+    let tag = [0.1, 0.15];
+    let scene = SceneEnu {
+        target: Some(TargetAppearance {
+            position_enu_m: tag,
+            heading_enu_rad: 0.3,
+            tag: TagBitmap::tag36h11(cfg.vision.tag_id).unwrap(),
+            tag_size_m: cfg.vision.tag_size_m,
+        }),
+        occluders: vec![],
+        ground_seed: 2,
+    };
+    let video = dir.path().join("camera.avi");
+    let mut w = opencv::videoio::VideoWriter::new(
+        &video.display().to_string(),
+        opencv::videoio::VideoWriter::fourcc('F', 'F', 'V', '1').unwrap(),
+        30.0,
+        opencv::core::Size::new(640, 480),
+        false,
+    )
+    .unwrap();
+    for k in 0..120 {
+        let opts = RenderOptions {
+            supersample: 2,
+            noise_sigma: 2.0,
+            ..Default::default()
+        };
+        w.write(&cv_io::mat_from_gray(&render(&cam, &pose, &scene, &opts, k)).unwrap())
+            .unwrap();
+    }
+    w.release().unwrap();
+    cfg.daemon.camera = video.display().to_string();
+    cfg.daemon.calibration = Some(calib);
+    // Hover: the vehicle may not wander from where the film was taken.
+    cfg.agent.start_enu_m = [0.0, 0.0];
+    cfg.agent.speed_limit_mps = 0.005;
+    cfg.validate().unwrap();
+    let r = daemon::run(&cfg, &opts(14.0, None)).await.unwrap();
+    let recs = &r.output.records;
+    let measured: Vec<_> = recs.iter().filter_map(|x| x.step.measurement_enu).collect();
+    eprintln!(
+        "{} frames, {} detections, {} measurements",
+        r.output.vision.frames,
+        r.output.vision.detections,
+        measured.len()
+    );
+    assert!(measured.len() >= 5);
+    // Each measurement is the filmed tag's pixel projected with the pose recorded for its
+    // frame (the pose at capture time); the vehicle drifts a little from where the film was
+    // taken, and that drift must show up exactly as the projection predicts.
+    let px = cam.world_enu_to_pixel(tag, 0.0, &pose).unwrap();
+    for x in recs.iter().filter(|x| x.step.measurement_enu.is_some()) {
+        let z = x.step.measurement_enu.unwrap();
+        let want = cam.pixel_to_ground_enu(px[0], px[1], &x.pose).unwrap();
+        let e = (z.x - want[0]).hypot(z.y - want[1]);
+        assert!(
+            e < 0.005,
+            "t={}: measured {z:?}, expected {want:?}",
+            x.step.t_s
+        );
+        let drift = x.pose.position_ned_m[0].hypot(x.pose.position_ned_m[1]);
+        assert!(drift < 0.1, "the vehicle wandered {drift} m");
+    }
+    let last_measured = recs
+        .iter()
+        .rev()
+        .find(|x| x.step.measurement_enu.is_some())
+        .unwrap();
+    let est = last_measured.step.estimate_enu;
+    assert!(
+        (est.x - tag[0]).hypot(est.y - tag[1]) < 0.1,
+        "estimate {est:?}"
+    );
+    // No ground truth in the field.
+    assert!(recs.iter().all(|x| x.step.target_enu.x.is_nan()));
+    // The file ends: the camera is lost, the vehicle holds.
+    assert_eq!(recs.last().unwrap().state, TrackState::CameraLost);
+    assert_eq!(r.final_mode, Some(Mode::Hold));
+}
+
+#[test]
+fn field_configs_load_and_name_their_camera_when_it_is_missing() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    for (file, url) in [
+        ("config/px4.toml", "udpin:0.0.0.0:14540"),
+        ("config/ardupilot.toml", "serial:/dev/ttyAMA0:921600"),
+    ] {
+        let cfg = Config::load(&root.join(file)).unwrap();
+        assert_eq!(cfg.daemon.vehicle, url);
+        assert_eq!(cfg.daemon.camera, "v4l2:0");
+        let calib = root.join(cfg.daemon.calibration.as_ref().unwrap());
+        let intr = infotrack::vision::cv_io::load_calibration(&calib).unwrap();
+        assert_eq!((intr.width_px, intr.height_px), (1280, 720));
+    }
+    if std::path::Path::new("/dev/video0").exists() {
+        eprintln!("a camera is attached: the missing-camera check does not apply here");
+        return;
+    }
+    // No camera on this machine: a clear error before anything connects or flies.
+    let out = Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .args([
+            "run",
+            "--config",
+            "config/px4.toml",
+            "--duration",
+            "1",
+            "--quiet",
+        ])
+        .current_dir(root)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        e.contains("camera `v4l2:0`") && e.contains("could not open"),
+        "{e}"
+    );
+}

@@ -93,9 +93,23 @@ pub struct DaemonConfig {
     /// over MAVLink on loopback UDP), or a MAVLink URL (`udpin:0.0.0.0:14540`,
     /// `serial:/dev/ttyAMA0:921600`, ...).
     pub vehicle: String,
-    /// The camera: `synthetic` (frames rendered from the simulated target; needs the
-    /// simulated world). Real capture sources are not wired into the daemon yet.
+    /// The camera: `synthetic` (frames rendered from the simulated target on the simulated
+    /// roads), or a capture source for a real camera: `v4l2:0`, `/dev/video0`,
+    /// `gst:... ! appsink`, a video file or `dir/%04d.png`. With a real camera there is no
+    /// simulated target and no ground truth.
     pub camera: String,
+    /// OpenCV calibration file of the real camera (camera_matrix, distortion_coefficients,
+    /// image_width, image_height); its size is requested from the camera.
+    pub calibration: Option<PathBuf>,
+    /// The camera's tilt from looking straight down with the image top to the nose: roll,
+    /// pitch, yaw in body FRD, rad.
+    pub camera_mount_rpy_rad: [f64; 3],
+    /// Camera centre in body FRD, m.
+    pub camera_offset_body_frd_m: [f64; 3],
+    /// Frame rate requested from a real camera, Hz (0: its default).
+    pub camera_fps: f64,
+    /// Motion model of the particle filter (`dmmn`, `cv`); `--motion` overrides it.
+    pub motion: String,
     /// Own MAVLink system id.
     pub system_id: u8,
     /// Own MAVLink component id (191: onboard computer).
@@ -124,6 +138,11 @@ impl Default for DaemonConfig {
         Self {
             vehicle: "mock:px4".into(),
             camera: "synthetic".into(),
+            calibration: None,
+            camera_mount_rpy_rad: [0.0; 3],
+            camera_offset_body_frd_m: [0.0; 3],
+            camera_fps: 0.0,
+            motion: "dmmn".into(),
             system_id: 1,
             component_id: 191,
             setpoint_hz: 20.0,

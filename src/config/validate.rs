@@ -406,11 +406,43 @@ fn validate_daemon(c: &Config) -> Result<(), ConfigError> {
         })?,
     }
     if d.camera != "synthetic" {
+        crate::vision::capture::CaptureSource::parse(&d.camera)
+            .map_err(|e| invalid("daemon.camera", &d.camera, &e.to_string()))?;
+        if d.calibration.is_none() {
+            return Err(invalid(
+                "daemon.calibration",
+                "none",
+                "a real camera needs its OpenCV calibration file",
+            ));
+        }
+    }
+    for (k, v) in d
+        .camera_mount_rpy_rad
+        .iter()
+        .chain(&d.camera_offset_body_frd_m)
+        .enumerate()
+    {
+        if !v.is_finite() {
+            return Err(invalid(
+                if k < 3 {
+                    "daemon.camera_mount_rpy_rad"
+                } else {
+                    "daemon.camera_offset_body_frd_m"
+                },
+                v,
+                "must be finite",
+            ));
+        }
+    }
+    if !crate::motion::MODEL_NAMES.contains(&d.motion.as_str()) {
         return Err(invalid(
-            "daemon.camera",
-            &d.camera,
-            "only `synthetic` is wired into the daemon so far",
+            "daemon.motion",
+            &d.motion,
+            &format!("must be one of {:?}", crate::motion::MODEL_NAMES),
         ));
+    }
+    if !(d.camera_fps.is_finite() && d.camera_fps >= 0.0) {
+        return Err(invalid("daemon.camera_fps", d.camera_fps, "must be >= 0"));
     }
     if !(d.setpoint_hz.is_finite() && (10.0..=100.0).contains(&d.setpoint_hz)) {
         return Err(invalid(

@@ -9,11 +9,16 @@
 //! On the embedded default the vehicle is an in-process mock autopilot reached through real
 //! MAVLink over loopback UDP, and the camera is the synthetic one.
 //!
+//! With `daemon.camera` a capture source instead of `synthetic`, frames come from the
+//! camera, each projected with the vehicle pose interpolated at its capture time, and there
+//! is no simulated target.
+//!
 //! Not built yet: a simulated clock (the loop runs on the wall clock, so 90 s of flight take
-//! 90 s) and real camera capture in the daemon.
+//! 90 s).
 
 pub mod flight_log;
 pub mod pipeline;
+pub mod pose_history;
 pub mod replay;
 
 use std::path::PathBuf;
@@ -346,6 +351,14 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         }
         let snap = snapshot(&link);
         *shared.vehicle.lock().expect("shared poisoned") = snap;
+        if let (Some(sn), Some((at, _, _))) = (snap, link.state().local_ned) {
+            // Stamped with the telemetry's arrival, for frames from a real camera.
+            shared
+                .poses
+                .lock()
+                .expect("shared poisoned")
+                .push(at, sn.pose);
+        }
         let lost = link.state().lost;
         if lost != was_lost {
             // Commands on stale state are worse than none: the vehicle's own failsafe acts.

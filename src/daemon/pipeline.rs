@@ -16,7 +16,10 @@ use crate::motion;
 use crate::rng::{stream_rng, Stream};
 use crate::sim::target::TargetSim;
 use crate::sim::vision_sensor::{VisionSensor, VisionStats};
-use crate::vision::camera_model::VehiclePoseNed;
+use crate::vision::camera_model::{CameraModel, CameraMount, VehiclePoseNed};
+use crate::vision::capture::{Camera, CaptureConfig};
+use crate::vision::detector::{AprilTagDetector, RoiPx, RoiSearch};
+use crate::vision::projection::{measure_tag, ProjectionNoise};
 use crate::world::geometry::Enu2;
 use crate::world::World;
 
@@ -90,6 +93,9 @@ pub struct Shared {
     pub stop: AtomicBool,
     /// The camera delivers nothing while set (fault injection: a frozen camera).
     pub camera_frozen: AtomicBool,
+    /// Recent vehicle poses by arrival time (written by the async side), for frames from a
+    /// real camera.
+    pub poses: Mutex<super::pose_history::PoseHistory>,
 }
 
 impl Shared {
@@ -101,6 +107,9 @@ impl Shared {
             status: Mutex::new(None),
             stop: AtomicBool::new(false),
             camera_frozen: AtomicBool::new(false),
+            poses: Mutex::new(super::pose_history::PoseHistory::new(Duration::from_secs(
+                2,
+            ))),
         })
     }
 }
@@ -149,6 +158,110 @@ pub enum Ready {
     Err(String),
 }
 
+/// A real camera: frames from capture, projected with the pose at their capture time.
+struct FieldCamera {
+    camera: Camera,
+    model: CameraModel,
+    search: RoiSearch<AprilTagDetector>,
+    noise: ProjectionNoise,
+    tag_ids: Vec<u32>,
+    tag_size_m: f64,
+}
+
+impl FieldCamera {
+    fn open(cfg: &Config) -> Result<Self, String> {
+        let d = &cfg.daemon;
+        let calib = d
+            .calibration
+            .as_deref()
+            .ok_or("daemon.calibration is needed with a real camera")?;
+        let intrinsics =
+            crate::vision::cv_io::load_calibration(calib).map_err(|e| e.to_string())?;
+        let [r, p, y] = d.camera_mount_rpy_rad;
+        let camera = Camera::open(CaptureConfig {
+            source: d.camera.clone(),
+            width_px: intrinsics.width_px,
+            height_px: intrinsics.height_px,
+            fps: d.camera_fps,
+            timeout_s: d.camera_timeout_s,
+        })
+        .map_err(|e| e.to_string())?;
+        Ok(Self {
+            camera,
+            model: CameraModel {
+                intrinsics,
+                mount: CameraMount::from_angles(r, p, y, d.camera_offset_body_frd_m),
+            },
+            search: RoiSearch::new(
+                AprilTagDetector::new(cfg.vision.detector.clone()).map_err(|e| e.to_string())?,
+            ),
+            noise: cfg.vision.projection.clone(),
+            tag_ids: vec![cfg.vision.tag_id],
+            tag_size_m: cfg.vision.tag_size_m,
+        })
+    }
+
+    /// The newest frame, if one came: its pose (at capture time) and the measurement.
+    fn look(
+        &mut self,
+        shared: &Shared,
+        prior: (Enu2, nalgebra::Matrix2<f64>),
+        stats: &mut VisionStats,
+    ) -> Option<(VehiclePoseNed, Option<Enu2>)> {
+        let frame = self.camera.latest()?;
+        stats.frames += 1;
+        let pose = shared
+            .poses
+            .lock()
+            .expect("shared poisoned")
+            .at(frame.captured_at, Duration::from_millis(100));
+        let Some(pose) = pose else {
+            tracing::warn!(
+                "frame {}: no vehicle pose at its capture time; skipped",
+                frame.index
+            );
+            return None;
+        };
+        let i = &self.model.intrinsics;
+        if (frame.image.width, frame.image.height) != (i.width_px as usize, i.height_px as usize) {
+            tracing::error!(
+                "frame {} is {}x{} px but the calibration is for {}x{} px; skipped",
+                frame.index,
+                frame.image.width,
+                frame.image.height,
+                i.width_px,
+                i.height_px
+            );
+            return None;
+        }
+        let alt = pose.altitude_m().max(0.1);
+        let side_px = self.tag_size_m * i.fx_px / alt;
+        let roi = self
+            .model
+            .world_enu_to_pixel([prior.0.x, prior.0.y], 0.0, &pose)
+            .filter(|px| self.model.in_image(*px))
+            .map(|px| {
+                let sigma_m = prior.1.symmetric_eigenvalues().max().max(0.0).sqrt();
+                RoiPx::around(px, side_px, sigma_m * i.fx_px / alt)
+            });
+        let z = match self.search.detect(&frame.image, roi, &self.tag_ids) {
+            Ok((dets, how)) => dets.first().and_then(|d| {
+                stats.detections += 1;
+                if how == crate::vision::detector::SearchOutcome::Roi {
+                    stats.roi_hits += 1;
+                }
+                measure_tag(&self.model, &pose, d, &self.noise)
+                    .map(|m| Enu2::new(m.position_enu_m[0], m.position_enu_m[1]))
+            }),
+            Err(e) => {
+                tracing::warn!("frame {}: {e}", frame.index);
+                None
+            }
+        };
+        Some((pose, z))
+    }
+}
+
 /// Builds everything, reports on `ready`, waits for `go`, then runs until `shared.stop`.
 pub fn run(
     cfg: Config,
@@ -175,6 +288,18 @@ pub fn run(
         Err(e) => {
             let _ = ready.send(Ready::Err(e.to_string()));
             return PipelineOutput::default();
+        }
+    };
+    // A real camera replaces the simulated world's synthetic one.
+    let mut field = if cfg.daemon.camera == "synthetic" {
+        None
+    } else {
+        match FieldCamera::open(&cfg) {
+            Ok(f) => Some(f),
+            Err(e) => {
+                let _ = ready.send(Ready::Err(e));
+                return PipelineOutput::default();
+            }
         }
     };
     let mut pf = ParticleFilter::new(
@@ -212,7 +337,9 @@ pub fn run(
         if let Some(wait) = due.checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }
-        target.step(&world.road, dt, &mut rng_target);
+        if field.is_none() {
+            target.step(&world.road, dt, &mut rng_target);
+        }
         let snapshot = *shared.vehicle.lock().expect("shared poisoned");
         if let Some(s) = snapshot {
             if !s.link_lost {
@@ -225,13 +352,39 @@ pub fn run(
 
         if t + 1e-9 >= next_filter as f64 / cfg.timing.filter_hz {
             next_filter += 1;
-            let truth = target.position_enu;
+            // No ground truth in the field.
+            let truth = if field.is_some() {
+                Enu2::new(f64::NAN, f64::NAN)
+            } else {
+                target.position_enu
+            };
             let started = Instant::now();
             let frame_seed = rand::Rng::gen(&mut rng_meas);
-            let frozen = shared.camera_frozen.load(Ordering::Relaxed);
+            let mut frozen = shared.camera_frozen.load(Ordering::Relaxed);
+            let mut pose = pose;
+            let mut agent = agent;
+            let field_z = match field.as_mut() {
+                Some(f) if !frozen => {
+                    match f.look(&shared, (pf.mean(), pf.covariance()), &mut sensor.stats) {
+                        Some((p, z)) => {
+                            pose = p;
+                            agent = Enu2::new(p.position_ned_m[1], p.position_ned_m[0]);
+                            Some(z)
+                        }
+                        None => {
+                            frozen = true;
+                            None
+                        }
+                    }
+                }
+                _ => None,
+            };
             let z = if frozen {
                 out.frames_missed += 1;
                 None
+            } else if let Some(z) = field_z {
+                last_frame_s = t;
+                z
             } else {
                 last_frame_s = t;
                 match sensor.measure(
@@ -262,7 +415,12 @@ pub fn run(
                 }
             };
             // From the frame's capture (the end of its rendering) to the updated filter.
-            last_frame_ms = started.elapsed().as_secs_f64() * 1e3 - sensor.last_render_ms;
+            let render_ms = if field.is_some() {
+                0.0
+            } else {
+                sensor.last_render_ms
+            };
+            last_frame_ms = started.elapsed().as_secs_f64() * 1e3 - render_ms;
             out.filter_ms.push(last_frame_ms);
             if z.is_some() {
                 last_seen_s = t;

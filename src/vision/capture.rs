@@ -149,6 +149,7 @@ pub struct Camera {
     thread: Option<JoinHandle<()>>,
     /// Stalls seen (timeouts), for reports.
     pub stalls: u64,
+    ended: bool,
 }
 
 impl Camera {
@@ -176,6 +177,7 @@ impl Camera {
             stop,
             thread: Some(thread),
             stalls: 0,
+            ended: false,
         })
     }
 
@@ -186,7 +188,10 @@ impl Camera {
         loop {
             match self.rx.recv_timeout(timeout) {
                 Ok(CaptureEvent::Frame(f)) => return Ok(Some(f)),
-                Ok(CaptureEvent::Ended) | Err(RecvTimeoutError::Disconnected) => return Ok(None),
+                Ok(CaptureEvent::Ended) | Err(RecvTimeoutError::Disconnected) => {
+                    self.ended = true;
+                    return Ok(None);
+                }
                 Ok(CaptureEvent::Reopening(why)) => {
                     tracing::warn!("camera {}: {why}; reopening", self.cfg.source);
                 }
@@ -199,6 +204,33 @@ impl Camera {
                 }
             }
         }
+    }
+}
+
+impl Camera {
+    /// The newest frame delivered since the last call, without waiting (older ones are
+    /// dropped: the filter wants the freshest view). `Err(Ended)`-like end of a file is
+    /// `Ok(None)` with `ended()` true.
+    pub fn latest(&mut self) -> Option<Frame> {
+        let mut newest = None;
+        loop {
+            match self.rx.try_recv() {
+                Ok(CaptureEvent::Frame(f)) => newest = Some(f),
+                Ok(CaptureEvent::Ended) | Err(mpsc::TryRecvError::Disconnected) => {
+                    self.ended = true;
+                    return newest;
+                }
+                Ok(CaptureEvent::Reopening(why)) => {
+                    tracing::warn!("camera {}: {why}; reopening", self.cfg.source);
+                }
+                Err(mpsc::TryRecvError::Empty) => return newest,
+            }
+        }
+    }
+
+    /// Whether a file or sequence has ended.
+    pub fn ended(&self) -> bool {
+        self.ended
     }
 }
 
@@ -225,6 +257,7 @@ fn reader(
     let mut mat = Mat::default();
     while !stop.load(std::sync::atomic::Ordering::Relaxed) {
         let got = cap.read(&mut mat).unwrap_or(false) && !mat.empty();
+        let captured_at = Instant::now();
         if !got {
             if !src.is_live() {
                 let _ = tx.send(CaptureEvent::Ended);
@@ -255,6 +288,7 @@ fn reader(
         let frame = Frame {
             index,
             capture_time_s: t,
+            captured_at,
             image,
         };
         index += 1;

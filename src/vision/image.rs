@@ -64,6 +64,9 @@ pub struct Frame {
     /// Capture time, s, on the clock of whoever made the frame (the companion's monotonic
     /// clock for a live camera, the file's time line for a video).
     pub capture_time_s: f64,
+    /// When the frame arrived from the driver, on the companion's monotonic clock: what
+    /// the vehicle pose is looked up at.
+    pub captured_at: std::time::Instant,
     /// The image.
     pub image: GrayImage,
 }
