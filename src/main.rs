@@ -117,6 +117,9 @@ struct ParamsArgs {
     /// Seconds to wait for the vehicle's heartbeat.
     #[arg(long, default_value_t = 10.0)]
     timeout: f64,
+    /// MAVLink 2 signing key file (64 hex digits) for a vehicle with signing on.
+    #[arg(long)]
+    signing_key: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -473,8 +476,15 @@ fn params(a: ParamsArgs) -> Result<()> {
         other => bail!("unknown params action `{other}` (check or apply)"),
     };
     let file = params_file::read(&a.file)?;
+    let key = a
+        .signing_key
+        .as_deref()
+        .map(infotrack::autopilot::signing::SigningKey::load)
+        .transpose()?;
     let ok = runtime()?.block_on(async move {
-        let l = link::VehicleLink::connect(link::LinkConfig::new(&a.connect)).await?;
+        let mut lc = link::LinkConfig::new(&a.connect);
+        lc.signing_key = key;
+        let l = link::VehicleLink::connect(lc).await?;
         l.wait_vehicle(std::time::Duration::from_secs_f64(a.timeout))
             .await?;
         let rows = if apply {

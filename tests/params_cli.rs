@@ -131,3 +131,47 @@ fn a_malformed_line_names_the_file_and_line() {
         "{err}"
     );
 }
+
+#[test]
+fn a_signed_vehicle_answers_only_a_signed_companion() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = dir.path().join("mavlink.key");
+    std::fs::write(&key, format!("# lab key\n{}\n", "3c".repeat(32))).unwrap();
+    let port = free_udp_port();
+    let child = bin()
+        .args(["mock-autopilot", "--flavor", "ardupilot", "--listen"])
+        .arg(format!("udpin:127.0.0.1:{port}"))
+        .arg("--signing-key")
+        .arg(&key)
+        .spawn()
+        .unwrap();
+    let _mock = Mock(child);
+    std::thread::sleep(Duration::from_millis(300));
+    let file = dir.path().join("one.parm");
+    std::fs::write(&file, "WPNAV_SPEED,1000\n").unwrap();
+    let run = |with_key: bool| {
+        let mut c = bin();
+        c.args(["params", "check"]).arg(&file).args([
+            "--connect",
+            &format!("udpout:127.0.0.1:{port}"),
+            "--timeout",
+            "3",
+        ]);
+        if with_key {
+            c.arg("--signing-key").arg(&key);
+        }
+        c.output().unwrap()
+    };
+    let unsigned = run(false);
+    assert!(
+        !unsigned.status.success(),
+        "an unsigned companion was answered"
+    );
+    let signed = run(true);
+    assert!(
+        signed.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&signed.stdout),
+        String::from_utf8_lossy(&signed.stderr)
+    );
+}

@@ -82,44 +82,30 @@ pub fn project_pixel(
         }
     };
     let (du, da, dz) = (0.25, 1e-5, 1e-3);
-    let mut p = *pose;
+    let [u, v] = pixel;
     add(
-        cam.pixel_to_ground_enu(pixel[0] + du, pixel[1], pose),
+        cam.pixel_to_ground_enu(u + du, v, pose),
         du,
         noise.pixel_sigma_px,
     );
     add(
-        cam.pixel_to_ground_enu(pixel[0], pixel[1] + du, pose),
+        cam.pixel_to_ground_enu(u, v + du, pose),
         du,
         noise.pixel_sigma_px,
     );
-    p.roll_rad += da;
-    add(
-        cam.pixel_to_ground_enu(pixel[0], pixel[1], &p),
-        da,
-        noise.tilt_sigma_rad,
-    );
-    p = *pose;
-    p.pitch_rad += da;
-    add(
-        cam.pixel_to_ground_enu(pixel[0], pixel[1], &p),
-        da,
-        noise.tilt_sigma_rad,
-    );
-    p = *pose;
-    p.yaw_rad += da;
-    add(
-        cam.pixel_to_ground_enu(pixel[0], pixel[1], &p),
-        da,
-        noise.yaw_sigma_rad,
-    );
-    p = *pose;
-    p.position_ned_m[2] -= dz;
-    add(
-        cam.pixel_to_ground_enu(pixel[0], pixel[1], &p),
-        dz,
-        noise.altitude_sigma_m,
-    );
+    // Each pose uncertainty in turn: (perturbation, step, sigma).
+    type Perturb = fn(&mut VehiclePoseNed, f64);
+    let pose_terms: [(Perturb, f64, f64); 4] = [
+        (|p, d| p.roll_rad += d, da, noise.tilt_sigma_rad),
+        (|p, d| p.pitch_rad += d, da, noise.tilt_sigma_rad),
+        (|p, d| p.yaw_rad += d, da, noise.yaw_sigma_rad),
+        (|p, d| p.position_ned_m[2] -= d, dz, noise.altitude_sigma_m),
+    ];
+    for (perturb, step, sigma) in pose_terms {
+        let mut p = *pose;
+        perturb(&mut p, step);
+        add(cam.pixel_to_ground_enu(u, v, &p), step, sigma);
+    }
     Some(GroundMeasurement {
         position_enu_m: g0,
         covariance_enu_m2: cov,
