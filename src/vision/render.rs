@@ -154,24 +154,61 @@ pub fn render(
     let (c, r_nc) = cam.camera_in_ned(pose);
     let s = opts.supersample.max(1);
     let offsets: Vec<f64> = (0..s).map(|i| (i as f64 + 0.5) / s as f64 - 0.5).collect();
+    let sample = |u: f64, v: f64| -> f64 {
+        let (x, y) = cam.intrinsics.unproject(u, v);
+        let d = r_nc * nalgebra::Vector3::new(x, y, 1.0);
+        if d.z <= 1e-9 || c.z >= 0.0 {
+            SKY
+        } else {
+            let t = -c.z / d.z;
+            // NED ground point -> ENU.
+            radiance(scene, c.y + t * d.y, c.x + t * d.x)
+        }
+    };
+    // Adaptive anti-aliasing: radiance at every pixel corner first; a pixel whose corners
+    // (or whose neighbours' corners) differ is supersampled, a smooth one is the mean of
+    // its corners. The dilation catches a tag corner that pokes into a pixel without
+    // covering any of its corners.
+    let corners: Vec<f64> = (0..(h + 1) * (w + 1))
+        .into_par_iter()
+        .map(|i| sample((i % (w + 1)) as f64 - 0.5, (i / (w + 1)) as f64 - 0.5))
+        .collect();
+    let corner = |u: usize, v: usize| corners[v * (w + 1) + u];
+    let busy: Vec<bool> = (0..w * h)
+        .map(|i| {
+            let (u, v) = (i % w, i / w);
+            let c = [
+                corner(u, v),
+                corner(u + 1, v),
+                corner(u, v + 1),
+                corner(u + 1, v + 1),
+            ];
+            let (lo, hi) = c
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+            hi - lo > 1.0
+        })
+        .collect();
     let mut img = vec![0f64; w * h];
     img.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
         for (u, px) in row.iter_mut().enumerate() {
-            let mut acc = 0.0;
-            for &dv in &offsets {
-                for &du in &offsets {
-                    let (x, y) = cam.intrinsics.unproject(u as f64 + du, v as f64 + dv);
-                    let d = r_nc * nalgebra::Vector3::new(x, y, 1.0);
-                    acc += if d.z <= 1e-9 || c.z >= 0.0 {
-                        SKY
-                    } else {
-                        let t = -c.z / d.z;
-                        // NED ground point -> ENU.
-                        radiance(scene, c.y + t * d.y, c.x + t * d.x)
-                    };
+            let near_edge = s > 1
+                && (v.saturating_sub(1)..(v + 2).min(h))
+                    .any(|vv| (u.saturating_sub(1)..(u + 2).min(w)).any(|uu| busy[vv * w + uu]));
+            let value = if near_edge {
+                let mut acc = 0.0;
+                for &dv in &offsets {
+                    for &du in &offsets {
+                        acc += sample(u as f64 + du, v as f64 + dv);
+                    }
                 }
-            }
-            *px = acc / (s * s) as f64 * opts.gain + opts.offset;
+                acc / (s * s) as f64
+            } else if s > 1 {
+                (corner(u, v) + corner(u + 1, v) + corner(u, v + 1) + corner(u + 1, v + 1)) / 4.0
+            } else {
+                sample(u as f64, v as f64)
+            };
+            *px = value * opts.gain + opts.offset;
         }
     });
     if opts.blur_sigma_px > 0.0 {
