@@ -426,3 +426,25 @@ fn field_configs_load_and_name_their_camera_when_it_is_missing() {
         "{e}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_refused_takeoff_is_a_clear_error_and_leaves_the_vehicle_in_hold() {
+    // A vehicle whose estimator never settles refuses to arm.
+    let port = free_udp_port();
+    let mut mc = MockConfig::new(Flavor::Px4);
+    mc.estimator_ready_after_s = 1e6;
+    let mock = spawn(&format!("udpin:127.0.0.1:{port}"), mc, Faults::default())
+        .await
+        .unwrap();
+    let mut cfg = lab();
+    cfg.daemon.vehicle = format!("udpout:127.0.0.1:{port}");
+    let err = daemon::run(&cfg, &opts(10.0, None))
+        .await
+        .err()
+        .expect("the takeoff cannot succeed")
+        .to_string();
+    assert!(err.contains("ARM") && err.contains("refused"), "{err}");
+    assert!(!mock.with(|m| m.armed()));
+    // It had switched to OFFBOARD for the takeoff; the daemon put it back in hold.
+    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+}

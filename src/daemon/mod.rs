@@ -127,6 +127,8 @@ pub enum StopReason {
     Duration,
     /// SIGINT or SIGTERM.
     Signal,
+    /// An internal fault (the pipeline thread died).
+    Fault,
 }
 
 /// What a run produced.
@@ -290,22 +292,35 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         .wait_vehicle(Duration::from_secs_f64(d.connect_timeout_s))
         .await?;
     tracing::info!("vehicle: {flavor} on {url}");
-    link.request_telemetry().await?;
-    link.take_off(
-        cfg.agent.altitude_m,
-        Duration::from_secs_f64(d.takeoff_timeout_s),
-    )
-    .await?;
-    // Start where the simulator's agent starts.
-    let start = cfg.agent.start_enu_m;
-    link.set_setpoint(
-        PositionEnu {
-            x_east_m: start[0],
-            y_north_m: start[1],
-            z_up_m: cfg.agent.altitude_m,
-        },
-        0.0,
-    )?;
+    let launched: Result<(), LinkError> = async {
+        link.request_telemetry().await?;
+        link.take_off(
+            cfg.agent.altitude_m,
+            Duration::from_secs_f64(d.takeoff_timeout_s),
+        )
+        .await?;
+        // Start where the simulator's agent starts.
+        let start = cfg.agent.start_enu_m;
+        link.set_setpoint(
+            PositionEnu {
+                x_east_m: start[0],
+                y_north_m: start[1],
+                z_up_m: cfg.agent.altitude_m,
+            },
+            0.0,
+        )
+    }
+    .await;
+    if let Err(e) = launched {
+        // A takeoff that failed half-way may have left the vehicle armed and climbing.
+        shared.stop.store(true, Ordering::Relaxed);
+        drop(go_tx);
+        if let Err(h) = link.hold().await {
+            tracing::error!("could not put the vehicle in hold: {h}");
+        }
+        link.flush_tlog();
+        return Err(e.into());
+    }
 
     *shared.vehicle.lock().expect("shared poisoned") = snapshot(&link);
     let _ = go_tx.send(());
@@ -327,6 +342,11 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         }
         if began.elapsed().as_secs_f64() >= opts.duration_s {
             break StopReason::Duration;
+        }
+        if pipeline.is_finished() {
+            // The pipeline died (a panic): nothing decides any more; hold.
+            tracing::error!("the pipeline thread stopped; holding the vehicle");
+            break StopReason::Fault;
         }
         let now_s = began.elapsed().as_secs_f64();
         for (f, active) in opts.faults.iter().zip(fault_active.iter_mut()) {
@@ -416,15 +436,18 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
     };
 
     shared.stop.store(true, Ordering::Relaxed);
-    let output = tokio::task::spawn_blocking(move || pipeline.join())
-        .await
-        .map_err(|e| DaemonError::Setup(e.to_string()))?
-        .map_err(|_| DaemonError::Setup("the pipeline thread panicked".into()))?;
-    // Clean stop: hold before exiting.
+    let joined = tokio::task::spawn_blocking(move || pipeline.join()).await;
+    // Clean stop, whatever happened to the pipeline: hold before exiting.
     let hold = link.hold().await;
     if let Err(e) = &hold {
         tracing::error!("could not put the vehicle in hold: {e}");
     }
+    let output = joined
+        .map_err(|e| DaemonError::Setup(e.to_string()))?
+        .map_err(|_| {
+            link.flush_tlog();
+            DaemonError::Setup("the pipeline thread panicked (the vehicle was put in hold)".into())
+        })?;
     let state = link.state();
     link.flush_tlog();
     let steps: Vec<_> = output.records.iter().map(|r| r.step.clone()).collect();
