@@ -143,20 +143,22 @@ struct SimArgs {
     /// Scenario file; without it, the embedded config/default.toml (the paper's lab scenario).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Runs per guidance x motion combination.
-    #[arg(long, default_value_t = 10)]
-    runs: u64,
+    /// Runs per guidance x motion combination (default 10; with --closed-loop, 1).
+    #[arg(long)]
+    runs: Option<u64>,
     /// Seed of every random choice (default: the config's `seed`).
     #[arg(long)]
     seed: Option<u64>,
     /// Seconds per run (default: the config's timing.duration_s, 90 s in the paper's scenario).
     #[arg(long)]
     duration: Option<f64>,
-    /// Guidance laws, comma-separated, of eer, pfwm, lawn, kf, truth.
-    #[arg(long, default_value = "eer,pfwm,lawn,kf", value_delimiter = ',')]
+    /// Guidance laws, comma-separated, of eer, pfwm, lawn, kf, truth (default
+    /// eer,pfwm,lawn,kf; with --closed-loop only eer flies).
+    #[arg(long, value_delimiter = ',')]
     guidance: Vec<String>,
-    /// Motion models / estimators, comma-separated, of cv, dmmn, kf.
-    #[arg(long, default_value = "cv", value_delimiter = ',')]
+    /// Motion models / estimators, comma-separated, of cv, dmmn, kf (default cv; with
+    /// --closed-loop one of cv, dmmn, default the config's daemon.motion).
+    #[arg(long, value_delimiter = ',')]
     motion: Vec<String>,
     /// Write the summary as JSON here.
     #[arg(long)]
@@ -175,6 +177,11 @@ struct SimArgs {
     /// step).
     #[arg(long)]
     vision: bool,
+    /// Fly the full daemon instead (`infotrack run`: synthetic camera, detector, filter, EER,
+    /// real MAVLink to the in-process mock autopilot) on a simulated clock, faster than real
+    /// time; prints the daemon's table. One run, EER guidance.
+    #[arg(long)]
+    closed_loop: bool,
 }
 
 #[derive(clap::Args)]
@@ -239,23 +246,72 @@ fn load_config(path: Option<&Path>) -> Result<Config> {
     })
 }
 
+fn sim_closed_loop(a: SimArgs) -> Result<()> {
+    let mut cfg = load_config(a.config.as_deref())?;
+    if a.runs.is_some_and(|r| r != 1) {
+        bail!("--closed-loop flies one run; drop --runs or set it to 1");
+    }
+    if a.guidance.iter().any(|g| g != "eer") {
+        bail!("--closed-loop flies the daemon's EER guidance; --guidance can only be eer");
+    }
+    if a.vision || a.threads.is_some() || a.json.is_some() {
+        bail!("--vision, --threads and --json do not apply to --closed-loop (it always measures through rendered frames; see --out for its logs)");
+    }
+    match a.motion.as_slice() {
+        [] => {}
+        [m] => {
+            cfg.daemon.motion = m.clone();
+            cfg.validate().with_context(|| format!("--motion `{m}`"))?;
+        }
+        _ => bail!("--closed-loop flies one motion model; give one --motion"),
+    }
+    let duration = a.duration.unwrap_or(cfg.timing.duration_s);
+    if !(duration.is_finite() && duration > 0.0) {
+        bail!("--duration must be a positive number of seconds, got {duration}");
+    }
+    if let Some(d) = &a.out {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    let opts = infotrack::daemon::RunOptions {
+        duration_s: duration,
+        seed: a.seed.unwrap_or(cfg.seed),
+        motion: cfg.daemon.motion.clone(),
+        tlog: a.out.as_ref().map(|d| d.join("link.tlog")),
+        status_line: false,
+        faults: Vec::new(),
+    };
+    run_cmd::fly(&cfg, &opts, a.out.as_deref(), run_cmd::Clock::Simulated)
+}
+
 fn sim(a: SimArgs) -> Result<()> {
+    if a.closed_loop {
+        return sim_closed_loop(a);
+    }
     let cfg = load_config(a.config.as_deref())?;
-    if a.runs == 0 {
+    let runs = a.runs.unwrap_or(10);
+    let guidance_names = if a.guidance.is_empty() {
+        vec!["eer".to_string(), "pfwm".into(), "lawn".into(), "kf".into()]
+    } else {
+        a.guidance.clone()
+    };
+    let motion_names = if a.motion.is_empty() {
+        vec!["cv".to_string()]
+    } else {
+        a.motion.clone()
+    };
+    if runs == 0 {
         bail!("--runs must be at least 1");
     }
     let duration = a.duration.unwrap_or(cfg.timing.duration_s);
     if !(duration.is_finite() && duration > 0.0) {
         bail!("--duration must be a positive number of seconds, got {duration}");
     }
-    let guidance = a
-        .guidance
+    let guidance = guidance_names
         .iter()
         .map(|g| g.parse::<GuidanceKind>().map_err(anyhow::Error::msg))
         .collect::<Result<Vec<_>>>()
         .context("--guidance")?;
-    let estimators = a
-        .motion
+    let estimators = motion_names
         .iter()
         .map(|m| EstimatorKind::parse(m).map_err(anyhow::Error::msg))
         .collect::<Result<Vec<_>>>()
@@ -269,7 +325,7 @@ fn sim(a: SimArgs) -> Result<()> {
     let mc = MonteCarlo {
         guidance,
         estimators,
-        runs: a.runs,
+        runs,
         seed: a.seed.unwrap_or(cfg.seed),
         duration_s: duration,
         keep_outputs: a.out.is_some(),

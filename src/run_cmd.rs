@@ -89,6 +89,14 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
         percentile(&o.latency_ms, 0.5),
         percentile(&o.latency_ms, 0.99)
     );
+    let pp = |v: &[f64]| format!("{:.1}/{:.1}", percentile(v, 0.5), percentile(v, 0.99));
+    let _ = writeln!(
+        t,
+        "frame->setpoint parts p50/p99 (ms): detection {}, filter {}, guidance {}",
+        pp(&o.detect_ms),
+        pp(&o.update_ms),
+        pp(&o.guidance_ms)
+    );
     let _ = writeln!(
         t,
         "vehicle: final mode {:?}; failsafe mode changes {:?}; link losses {}; setpoints refused by the geofence {}; filter periods without a camera frame {}",
@@ -132,18 +140,44 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         status_line: !a.quiet,
         faults: a.inject.clone(),
     };
+    fly(&cfg, &opts, a.out.as_deref(), Clock::Wall(rt))
+}
+
+/// Which clock a flight runs on.
+pub enum Clock {
+    /// Real time on this runtime: the field, and the README's main command.
+    Wall(tokio::runtime::Runtime),
+    /// Simulated time (`infotrack sim --closed-loop`): as fast as the CPU allows.
+    Simulated,
+}
+
+/// Flies the daemon and prints the table; writes the logs and plots into `out`.
+pub fn fly(
+    cfg: &Config,
+    opts: &RunOptions,
+    out: Option<&std::path::Path>,
+    clock: Clock,
+) -> Result<()> {
+    let motion = opts.motion.clone();
     let cpu_before = cpu_seconds();
     let wall = std::time::Instant::now();
-    let report = rt.block_on(daemon::run(&cfg, &opts))?;
+    let report = match clock {
+        Clock::Wall(rt) => rt.block_on(daemon::run(cfg, opts))?,
+        Clock::Simulated => daemon::run_simulated(cfg, opts)?,
+    };
     let cpu = cpu_seconds() - cpu_before;
     print!("{}", table(&report, &motion));
+    let flown_s = report.output.records.last().map_or(0.0, |r| r.step.t_s);
     println!(
-        "resources: {:.0}% of one core over {:.1} s, peak resident memory {:.0} MB",
+        "resources: {:.0}% of one core over {:.1} s of wall time for {:.1} s of flight ({:.1}x real time), peak resident memory {:.0} MB",
         100.0 * cpu / wall.elapsed().as_secs_f64(),
         wall.elapsed().as_secs_f64(),
+        flown_s,
+        flown_s / wall.elapsed().as_secs_f64(),
         peak_rss_mb()
     );
-    if let Some(dir) = &a.out {
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let steps: Vec<_> = report
             .output
             .records
@@ -155,7 +189,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
             &dir.join("flight.csv"),
             flight_log::render(&report.output.records, opts.seed, &motion).as_bytes(),
         )?;
-        let world = World::from_config(&cfg);
+        let world = World::from_config(cfg);
         report::plots::scene(
             &dir.join("scene.png"),
             &format!("{} | closed loop, {} guidance", cfg.name, "eer"),

@@ -8,7 +8,8 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use tokio::time::Instant;
 
 use mavlink::dialects::ardupilotmega::*;
 use mavlink::{AsyncMavConnection, MavHeader, MavlinkVersion};

@@ -16,6 +16,11 @@ use mavlink::{MavHeader, MavlinkVersion};
 /// An open telemetry log.
 pub struct Tlog {
     out: Mutex<std::io::BufWriter<std::fs::File>>,
+    /// Wall-clock time at creation, µs since the Unix epoch.
+    opened_unix_us: u64,
+    /// The runtime's clock at creation: stamps advance with it, so a flight on the simulated
+    /// clock gets the time stamps it would have had in real time.
+    opened: tokio::time::Instant,
 }
 
 impl Tlog {
@@ -23,6 +28,11 @@ impl Tlog {
     pub fn create(path: &Path) -> std::io::Result<Self> {
         Ok(Self {
             out: Mutex::new(std::io::BufWriter::new(std::fs::File::create(path)?)),
+            opened_unix_us: SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .map(|d| d.as_micros() as u64)
+                .unwrap_or(0),
+            opened: tokio::time::Instant::now(),
         })
     }
 
@@ -32,10 +42,7 @@ impl Tlog {
         if mavlink::write_versioned_msg(&mut frame, MavlinkVersion::V2, *header, msg).is_err() {
             return;
         }
-        let us = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map(|d| d.as_micros() as u64)
-            .unwrap_or(0);
+        let us = self.opened_unix_us + self.opened.elapsed().as_micros() as u64;
         let mut out = self.out.lock().expect("tlog poisoned");
         // A full disk must not stop the flight; the log is best effort and flushed at the end.
         let _ = out.write_all(&us.to_be_bytes());

@@ -138,6 +138,10 @@ pub struct PipelineOutput {
     pub filter_ms: Vec<f64>,
     /// Guidance decision times, ms.
     pub guidance_ms: Vec<f64>,
+    /// Of each filter step: detection and ground projection of the frame, ms.
+    pub detect_ms: Vec<f64>,
+    /// Of each filter step: the particle filter's prediction (DMMN) and update, ms.
+    pub update_ms: Vec<f64>,
     /// Frame-to-command processing latency, ms, for every command: detection, projection and
     /// filter update of the latest frame plus the guidance decision (the wait between the
     /// frame and the next guidance tick is a matter of rates and is not included).
@@ -210,11 +214,12 @@ impl FieldCamera {
     ) -> Option<(VehiclePoseNed, Option<Enu2>)> {
         let frame = self.camera.latest()?;
         stats.frames += 1;
-        let pose = shared
-            .poses
-            .lock()
-            .expect("shared poisoned")
-            .at(frame.captured_at, Duration::from_millis(100));
+        let pose = shared.poses.lock().expect("shared poisoned").at(
+            // Capture stamps come from the capture thread on the wall clock, which is the
+            // runtime's clock whenever a real camera flies.
+            tokio::time::Instant::from_std(frame.captured_at),
+            Duration::from_millis(100),
+        );
         let Some(pose) = pose else {
             tracing::warn!(
                 "frame {}: no vehicle pose at its capture time; skipped",
@@ -262,96 +267,138 @@ impl FieldCamera {
     }
 }
 
-/// Builds everything, reports on `ready`, waits for `go`, then runs until `shared.stop`.
-pub fn run(
+/// The pipeline's state between ticks.
+struct Pipeline {
     cfg: Config,
-    motion_name: String,
-    seed: u64,
     shared: Arc<Shared>,
-    ready: mpsc::Sender<Ready>,
-    go: mpsc::Receiver<()>,
-) -> PipelineOutput {
-    let world = World::from_config(&cfg);
-    let mut rng_target = stream_rng(seed, 0, Stream::Target, 0);
-    let mut rng_meas = stream_rng(seed, 0, Stream::Measurement, 0);
-    let mut rng_filter = stream_rng(seed, 0, Stream::Filter, 0);
-    let mut rng_guid = stream_rng(seed, 0, Stream::Guidance, 0);
-    let mut model = match motion::build(&motion_name, &cfg) {
-        Ok(m) => m,
-        Err(e) => {
-            let _ = ready.send(Ready::Err(e.to_string()));
-            return PipelineOutput::default();
-        }
-    };
-    let mut sensor = match VisionSensor::from_config(&cfg) {
-        Ok(s) => s,
-        Err(e) => {
-            let _ = ready.send(Ready::Err(e.to_string()));
-            return PipelineOutput::default();
-        }
-    };
-    // A real camera replaces the simulated world's synthetic one.
-    let mut field = if cfg.daemon.camera == "synthetic" {
-        None
-    } else {
-        match FieldCamera::open(&cfg) {
-            Ok(f) => Some(f),
-            Err(e) => {
-                let _ = ready.send(Ready::Err(e));
-                return PipelineOutput::default();
-            }
-        }
-    };
-    let mut pf = ParticleFilter::new(
-        FilterParams::from_config(&cfg),
-        world.workspace_enu,
-        &mut rng_filter,
-    );
-    let mut planner = EerPlanner::new(EerParams::from_config(&cfg));
-    let mut lawn = LawnmowerPath::new(&cfg.guidance.lawn);
-    let mut target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
-    let _ = ready.send(Ready::Ok);
-    if go.recv().is_err() {
-        return PipelineOutput::default();
+    world: World,
+    rng_target: crate::rng::CoreRng,
+    rng_meas: crate::rng::CoreRng,
+    rng_filter: crate::rng::CoreRng,
+    rng_guid: crate::rng::CoreRng,
+    model: Box<dyn motion::MotionModel>,
+    sensor: VisionSensor,
+    field: Option<FieldCamera>,
+    pf: ParticleFilter,
+    planner: EerPlanner,
+    lawn: LawnmowerPath,
+    target: TargetSim,
+    out: PipelineOutput,
+    next_filter: u64,
+    next_guid: u64,
+    last_seen_s: f64,
+    last_frame_s: f64,
+    last_pose: Option<VehiclePoseNed>,
+    last_frame_ms: f64,
+    entropy: f64,
+    last_eer: f64,
+    command: Option<Command>,
+    state: TrackState,
+    tick: u64,
+}
+
+impl Pipeline {
+    fn build(
+        cfg: Config,
+        motion_name: &str,
+        seed: u64,
+        shared: Arc<Shared>,
+    ) -> Result<Self, String> {
+        let world = World::from_config(&cfg);
+        let mut rng_target = stream_rng(seed, 0, Stream::Target, 0);
+        let rng_meas = stream_rng(seed, 0, Stream::Measurement, 0);
+        let mut rng_filter = stream_rng(seed, 0, Stream::Filter, 0);
+        let rng_guid = stream_rng(seed, 0, Stream::Guidance, 0);
+        let model = motion::build(motion_name, &cfg).map_err(|e| e.to_string())?;
+        let sensor = VisionSensor::from_config(&cfg).map_err(|e| e.to_string())?;
+        // A real camera replaces the simulated world's synthetic one.
+        let field = if cfg.daemon.camera == "synthetic" {
+            None
+        } else {
+            Some(FieldCamera::open(&cfg)?)
+        };
+        let pf = ParticleFilter::new(
+            FilterParams::from_config(&cfg),
+            world.workspace_enu,
+            &mut rng_filter,
+        );
+        let planner = EerPlanner::new(EerParams::from_config(&cfg));
+        let lawn = LawnmowerPath::new(&cfg.guidance.lawn);
+        let target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
+        Ok(Self {
+            cfg,
+            shared,
+            world,
+            rng_target,
+            rng_meas,
+            rng_filter,
+            rng_guid,
+            model,
+            sensor,
+            field,
+            pf,
+            planner,
+            lawn,
+            target,
+            out: PipelineOutput::default(),
+            next_filter: 1,
+            next_guid: 1,
+            last_seen_s: 0.0,
+            last_frame_s: 0.0,
+            last_pose: None,
+            last_frame_ms: 0.0,
+            entropy: f64::NAN,
+            last_eer: f64::NAN,
+            command: None,
+            state: TrackState::Tracking,
+            tick: 0,
+        })
     }
 
-    let d = &cfg.daemon;
-    let dt = 1.0 / cfg.timing.physics_hz;
-    let start = Instant::now();
-    let mut out = PipelineOutput::default();
-    let (mut next_filter, mut next_guid) = (1u64, 1u64);
-    let mut last_seen_s = 0.0;
-    let mut last_frame_s = 0.0;
-    let mut last_pose: Option<VehiclePoseNed> = None;
-    let mut last_frame_ms = 0.0;
-    let mut entropy = f64::NAN;
-    let mut last_eer = f64::NAN;
-    let mut command: Option<Command> = None;
-    let mut state = TrackState::Tracking;
-    let mut tick = 0u64;
-    while !shared.stop.load(Ordering::Relaxed) {
-        tick += 1;
-        let t = tick as f64 * dt;
-        // Real time: the target moves with the wall clock.
-        let due = start + Duration::from_secs_f64(t);
-        if let Some(wait) = due.checked_duration_since(Instant::now()) {
-            std::thread::sleep(wait);
-        }
+    fn finish(mut self) -> PipelineOutput {
+        self.out.vision = self.sensor.stats;
+        self.out
+    }
+
+    /// One physics tick: the target moves; a frame and a filter step, a guidance decision when due.
+    fn tick(&mut self) {
+        let Self {
+            cfg,
+            shared,
+            world,
+            rng_target,
+            rng_meas,
+            rng_filter,
+            rng_guid,
+            model,
+            sensor,
+            field,
+            pf,
+            planner,
+            lawn,
+            target,
+            out,
+            ..
+        } = self;
+        let d = &cfg.daemon;
+        let dt = 1.0 / cfg.timing.physics_hz;
+        self.tick += 1;
+        let t = self.tick as f64 * dt;
         if field.is_none() {
-            target.step(&world.road, dt, &mut rng_target);
+            target.step(&world.road, dt, rng_target);
         }
         let snapshot = *shared.vehicle.lock().expect("shared poisoned");
         if let Some(s) = snapshot {
             if !s.link_lost {
-                last_pose = Some(s.pose);
+                self.last_pose = Some(s.pose);
             }
         }
         let link_lost = snapshot.map_or(true, |s| s.link_lost);
-        let Some(pose) = last_pose else { continue };
+        let Some(pose) = self.last_pose else { return };
         let agent = Enu2::new(pose.position_ned_m[1], pose.position_ned_m[0]);
 
-        if t + 1e-9 >= next_filter as f64 / cfg.timing.filter_hz {
-            next_filter += 1;
+        if t + 1e-9 >= self.next_filter as f64 / cfg.timing.filter_hz {
+            self.next_filter += 1;
             // No ground truth in the field.
             let truth = if field.is_some() {
                 Enu2::new(f64::NAN, f64::NAN)
@@ -359,13 +406,13 @@ pub fn run(
                 target.position_enu
             };
             let started = Instant::now();
-            let frame_seed = rand::Rng::gen(&mut rng_meas);
+            let frame_seed = rand::Rng::gen(rng_meas);
             let mut frozen = shared.camera_frozen.load(Ordering::Relaxed);
             let mut pose = pose;
             let mut agent = agent;
             let field_z = match field.as_mut() {
                 Some(f) if !frozen => {
-                    match f.look(&shared, (pf.mean(), pf.covariance()), &mut sensor.stats) {
+                    match f.look(shared, (pf.mean(), pf.covariance()), &mut sensor.stats) {
                         Some((p, z)) => {
                             pose = p;
                             agent = Enu2::new(p.position_ned_m[1], p.position_ned_m[0]);
@@ -383,10 +430,10 @@ pub fn run(
                 out.frames_missed += 1;
                 None
             } else if let Some(z) = field_z {
-                last_frame_s = t;
+                self.last_frame_s = t;
                 z
             } else {
-                last_frame_s = t;
+                self.last_frame_s = t;
                 match sensor.measure(
                     &agent,
                     &truth,
@@ -401,11 +448,12 @@ pub fn run(
                     }
                 }
             };
+            let measured = Instant::now();
             // Without a frame nothing was looked at: predict only, no negative information.
             let stepped = if frozen {
-                pf.step_blind(model.as_mut(), &mut rng_filter)
+                pf.step_blind(model.as_mut(), rng_filter)
             } else {
-                pf.step(model.as_mut(), z, &agent, &world, &mut rng_filter)
+                pf.step(model.as_mut(), z, &agent, world, rng_filter)
             };
             let n_eff = match stepped {
                 Ok(r) => r.n_eff,
@@ -420,22 +468,25 @@ pub fn run(
             } else {
                 sensor.last_render_ms
             };
-            last_frame_ms = started.elapsed().as_secs_f64() * 1e3 - render_ms;
-            out.filter_ms.push(last_frame_ms);
+            self.last_frame_ms = started.elapsed().as_secs_f64() * 1e3 - render_ms;
+            out.filter_ms.push(self.last_frame_ms);
+            out.detect_ms
+                .push((measured - started).as_secs_f64() * 1e3 - render_ms);
+            out.update_ms.push(measured.elapsed().as_secs_f64() * 1e3);
             if z.is_some() {
-                last_seen_s = t;
+                self.last_seen_s = t;
             }
-            state = if link_lost {
+            self.state = if link_lost {
                 TrackState::LinkLost
-            } else if t - last_frame_s > d.camera_timeout_s {
-                if state != TrackState::CameraLost {
+            } else if t - self.last_frame_s > d.camera_timeout_s {
+                if self.state != TrackState::CameraLost {
                     tracing::error!(
                         "camera: no frame for {} s; holding position",
                         d.camera_timeout_s
                     );
                 }
                 TrackState::CameraLost
-            } else if t - last_seen_s > d.target_lost_after_s {
+            } else if t - self.last_seen_s > d.target_lost_after_s {
                 TrackState::Lost
             } else {
                 TrackState::Tracking
@@ -445,7 +496,7 @@ pub fn run(
                     t_s: t,
                     target_enu: truth,
                     agent_enu: agent,
-                    waypoint_enu: match command {
+                    waypoint_enu: match self.command {
                         Some(Command::GoTo(w)) => w,
                         _ => agent,
                     },
@@ -453,40 +504,40 @@ pub fn run(
                     estimate_enu: pf.mean(),
                     cov_m2: pf.covariance(),
                     n_eff,
-                    eer: last_eer,
+                    eer: self.last_eer,
                     target_occluded: world.is_occluded(&truth),
                     target_in_footprint: world.footprint.contains(&agent, &truth),
                 },
                 pose,
-                state,
+                state: self.state,
                 frame: !frozen,
-                command,
+                command: self.command,
             });
             *shared.status.lock().expect("shared poisoned") = Some(Status {
                 t_s: t,
                 seen: z.is_some(),
                 n_eff,
-                entropy,
-                state,
+                entropy: self.entropy,
+                state: self.state,
             });
         }
 
-        if t + 1e-9 >= next_guid as f64 / cfg.timing.guidance_hz {
-            next_guid += 1;
-            if state == TrackState::LinkLost {
-                // No commands decided on stale vehicle state.
-                continue;
+        if t + 1e-9 >= self.next_guid as f64 / cfg.timing.guidance_hz {
+            self.next_guid += 1;
+            if self.state == TrackState::LinkLost {
+                // No commands decided on stale vehicle self.state.
+                return;
             }
             let started = Instant::now();
-            let fallback = state == TrackState::Lost;
+            let fallback = self.state == TrackState::Lost;
             let decided = match (fallback, d.target_lost_fallback.as_str()) {
-                _ if state == TrackState::CameraLost => Some(Command::HoldHere),
+                _ if self.state == TrackState::CameraLost => Some(Command::HoldHere),
                 (true, "hold") => Some(Command::HoldHere),
                 (true, "lawn") => Some(Command::GoTo(lawn.next_point())),
-                _ => match planner.plan(&pf, model.as_mut(), &agent, &world, &mut rng_guid) {
+                _ => match planner.plan(pf, model.as_mut(), &agent, world, rng_guid) {
                     Ok(dec) => {
-                        entropy = dec.h_now;
-                        last_eer = dec.eer;
+                        self.entropy = dec.h_now;
+                        self.last_eer = dec.eer;
                         Some(Command::GoTo(dec.waypoint_enu))
                     }
                     Err(e) => {
@@ -503,19 +554,47 @@ pub fn run(
                     "guidance took {ms:.0} ms (budget {} ms): decision skipped",
                     d.guidance_budget_ms
                 );
-                continue;
+                return;
             }
             if let Some(c) = decided {
                 let c = match c {
                     Command::GoTo(w) => Command::GoTo(world.workspace_enu.clamp(&w)),
                     h => h,
                 };
-                command = Some(c);
-                out.latency_ms.push(last_frame_ms + ms);
+                self.command = Some(c);
+                out.latency_ms.push(self.last_frame_ms + ms);
                 *shared.command.lock().expect("shared poisoned") = Some(c);
             }
         }
     }
-    out.vision = sensor.stats;
-    out
+}
+
+/// Builds everything and reports on `ready`; then runs one physics tick for every message on
+/// `ticks` and answers each on `done`, until `ticks` closes. The clock is the caller's: the
+/// supervisor sends ticks on the runtime's clock, wall-clock in the field and simulated in
+/// `infotrack sim --closed-loop`.
+pub fn run(
+    cfg: Config,
+    motion_name: String,
+    seed: u64,
+    shared: Arc<Shared>,
+    ready: mpsc::Sender<Ready>,
+    ticks: mpsc::Receiver<()>,
+    done: mpsc::Sender<()>,
+) -> PipelineOutput {
+    let mut p = match Pipeline::build(cfg, &motion_name, seed, shared) {
+        Ok(p) => p,
+        Err(e) => {
+            let _ = ready.send(Ready::Err(e));
+            return PipelineOutput::default();
+        }
+    };
+    let _ = ready.send(Ready::Ok);
+    while ticks.recv().is_ok() {
+        p.tick();
+        if done.send(()).is_err() {
+            break;
+        }
+    }
+    p.finish()
 }

@@ -2,7 +2,8 @@
 //! capture time rather than the newest one (at 3 m/s a 50 ms-old frame is 15 cm off).
 
 use std::collections::VecDeque;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use tokio::time::Instant;
 
 use crate::vision::camera_model::VehiclePoseNed;
 

@@ -3,7 +3,8 @@
 //! only moves messages, keeps the clock and misbehaves on request.
 
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use tokio::time::Instant;
 
 use mavlink::dialects::ardupilotmega::MavMessage;
 use mavlink::{AsyncMavConnection, MavHeader, MavlinkVersion};
