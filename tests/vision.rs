@@ -7,6 +7,7 @@ use infotrack::vision::capture::{Camera, CaptureConfig};
 use infotrack::vision::cv_io;
 use infotrack::vision::detector::{
     AprilTagDetector, DetectorConfig, RoiPx, RoiSearch, SearchOutcome, TagDetection, TagDetector,
+    MIN_DECIMATED_TAG_SIDE_PX,
 };
 use infotrack::vision::image::GrayImage;
 use infotrack::vision::projection::{measure_tag, ProjectionNoise};
@@ -77,6 +78,7 @@ fn corners_and_ground_positions_are_accurate_from_1_2_to_60_m() {
     let mut worst_ground = 0.0f64;
     let mut found = 0;
     let mut n = 0;
+    let (mut coarse_errors, mut coarse_found, mut coarse_n) = (Vec::new(), 0, 0);
     for &alt in &[1.2, 3.0, 10.0, 30.0, 60.0] {
         for k in 0..6 {
             let s = shot(&mut rng, alt, 20f64.to_radians(), 3 + k);
@@ -88,12 +90,25 @@ fn corners_and_ground_positions_are_accurate_from_1_2_to_60_m() {
                 0,
             );
             n += 1;
+            let truth = truth_corners(&s);
+            // The coarse full-frame search (a tag of known size, decimated quads, corners
+            // refined at full resolution) must be as good.
+            let side = (truth[1][0] - truth[0][0]).hypot(truth[1][1] - truth[0][1]);
+            let coarse = (side / MIN_DECIMATED_TAG_SIDE_PX).floor().min(4.0);
+            if coarse > 2.0 {
+                coarse_n += 1;
+                if let Some(d) = det.detect_decimated(&img, coarse as f32).unwrap().first() {
+                    coarse_found += 1;
+                    for (c, t) in d.corners_px.iter().zip(truth.iter()) {
+                        coarse_errors.push((c[0] - t[0]).hypot(c[1] - t[1]));
+                    }
+                }
+            }
             let dets = det.detect(&img).unwrap();
             assert!(dets.len() <= 1, "{dets:?}");
             let Some(d) = dets.first() else { continue };
             found += 1;
             assert_eq!(d.id, 3 + k);
-            let truth = truth_corners(&s);
             for (c, t) in d.corners_px.iter().zip(truth.iter()) {
                 errors.push((c[0] - t[0]).hypot(c[1] - t[1]));
             }
@@ -118,6 +133,19 @@ fn corners_and_ground_positions_are_accurate_from_1_2_to_60_m() {
         "ground error {}% of altitude",
         100.0 * worst_ground
     );
+    coarse_errors.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    let (cmed, cmax) = (
+        coarse_errors[coarse_errors.len() / 2],
+        *coarse_errors.last().unwrap(),
+    );
+    eprintln!("coarse full frame: found {coarse_found}/{coarse_n}; corner error median {cmed:.4} px, max {cmax:.4} px");
+    assert!(
+        coarse_n >= 20,
+        "only {coarse_n} frames had a tag large enough"
+    );
+    assert_eq!(coarse_found, coarse_n, "the coarse search missed a tag");
+    assert!(cmed <= 0.1, "coarse median corner error {cmed} px");
+    assert!(cmax <= 0.5, "coarse max corner error {cmax} px");
 }
 
 #[test]
@@ -171,7 +199,7 @@ fn the_region_of_interest_finds_the_same_tag_and_falls_back_to_the_full_frame() 
     };
     let img = render(&s.cam, &s.pose, &scene(&s.target, vec![]), &opts, 1);
     let mut search = RoiSearch::new(detector());
-    let (full, how) = search.detect(&img, None, &[9]).unwrap();
+    let (full, how) = search.detect(&img, None, &[9], None).unwrap();
     assert_eq!(how, SearchOutcome::FullFrame);
     let center = s
         .cam
@@ -179,18 +207,33 @@ fn the_region_of_interest_finds_the_same_tag_and_falls_back_to_the_full_frame() 
         .unwrap();
     // A prediction a few pixels off, as a filter's would be.
     let predicted = RoiPx::around([center[0] + 6.0, center[1] - 4.0], full[0].side_px(), 3.0);
-    let (roi, how) = search.detect(&img, Some(predicted), &[9]).unwrap();
+    let (roi, how) = search.detect(&img, Some(predicted), &[9], None).unwrap();
     assert_eq!(how, SearchOutcome::Roi);
     for (a, b) in roi[0].corners_px.iter().zip(full[0].corners_px.iter()) {
         assert!((a[0] - b[0]).hypot(a[1] - b[1]) < 0.3, "{a:?} vs {b:?}");
     }
     // A prediction in the wrong place: the full frame still finds it.
     let wrong = RoiPx::around([40.0, 40.0], 60.0, 2.0);
-    let (far, how) = search.detect(&img, Some(wrong), &[9]).unwrap();
+    let (far, how) = search.detect(&img, Some(wrong), &[9], None).unwrap();
     assert_eq!(how, SearchOutcome::FullFrame);
     assert_eq!(far.len(), 1);
     // Another target id is not reported.
-    assert!(search.detect(&img, None, &[10]).unwrap().0.is_empty());
+    assert!(search.detect(&img, None, &[10], None).unwrap().0.is_empty());
+    // Knowing the tag's size, both searches may decimate coarsely (here the tag is ~90 px:
+    // factor 4 allowed, 5 computed): same tag, same corners.
+    let side = full[0].side_px();
+    assert!(side >= 4.0 * MIN_DECIMATED_TAG_SIDE_PX, "{side} px");
+    let mut coarse = RoiSearch::new(detector()).with_max_full_frame_decimation(4.0);
+    for (roi, want) in [
+        (Some(predicted), SearchOutcome::Roi),
+        (Some(wrong), SearchOutcome::FullFrame),
+    ] {
+        let (d, how) = coarse.detect(&img, roi, &[9], Some(side)).unwrap();
+        assert_eq!(how, want);
+        for (a, b) in d[0].corners_px.iter().zip(full[0].corners_px.iter()) {
+            assert!((a[0] - b[0]).hypot(a[1] - b[1]) < 0.3, "{a:?} vs {b:?}");
+        }
+    }
 }
 
 #[test]

@@ -198,7 +198,8 @@ impl FieldCamera {
             },
             search: RoiSearch::new(
                 AprilTagDetector::new(cfg.vision.detector.clone()).map_err(|e| e.to_string())?,
-            ),
+            )
+            .with_max_full_frame_decimation(cfg.vision.detector.max_full_frame_decimation),
             noise: cfg.vision.projection.clone(),
             tag_ids: vec![cfg.vision.tag_id],
             tag_size_m: cfg.vision.tag_size_m,
@@ -249,7 +250,10 @@ impl FieldCamera {
                 let sigma_m = prior.1.symmetric_eigenvalues().max().max(0.0).sqrt();
                 RoiPx::around(px, side_px, sigma_m * i.fx_px / alt)
             });
-        let z = match self.search.detect(&frame.image, roi, &self.tag_ids) {
+        let z = match self
+            .search
+            .detect(&frame.image, roi, &self.tag_ids, Some(side_px))
+        {
             Ok((dets, how)) => dets.first().and_then(|d| {
                 stats.detections += 1;
                 if how == crate::vision::detector::SearchOutcome::Roi {

@@ -66,7 +66,8 @@ impl VisionSensor {
             .collect();
         Ok(Self {
             cam,
-            search: RoiSearch::new(AprilTagDetector::new(v.detector.clone())?),
+            search: RoiSearch::new(AprilTagDetector::new(v.detector.clone())?)
+                .with_max_full_frame_decimation(v.detector.max_full_frame_decimation),
             opts: RenderOptions {
                 supersample: v.supersample,
                 gain: 1.0,
@@ -129,7 +130,9 @@ impl VisionSensor {
                 .in_image(px)
                 .then(|| RoiPx::around(px, side_px, sigma_m * px_per_m))
         });
-        let (dets, how) = self.search.detect(&img, roi, &[self.tag.id])?;
+        let (dets, how) = self
+            .search
+            .detect(&img, roi, &[self.tag.id], Some(side_px))?;
         let Some(d) = dets.first() else {
             return Ok(None);
         };

@@ -26,8 +26,13 @@ pub struct DetectBenchRow {
     pub frames: usize,
     /// Median full-frame detection time, ms.
     pub full_frame_ms: f64,
-    /// Median time with the region of interest (falling back to the full frame), ms.
+    /// Median full-frame detection time with the decimation the tag's known size allows
+    /// (the fallback of the region-of-interest search), ms.
+    pub coarse_ms: f64,
+    /// Median time with the region of interest (falling back to the coarse full frame), ms.
     pub roi_ms: f64,
+    /// Frames with the tag found, coarse full frame.
+    pub coarse_found: usize,
     /// Frames with the tag found, full frame.
     pub full_frame_found: usize,
     /// Frames with the tag found, region of interest first.
@@ -35,6 +40,9 @@ pub struct DetectBenchRow {
     /// Of those, found inside the region.
     pub roi_hits: usize,
 }
+
+/// A tag ~60 px wide at either resolution, as a tracker keeps it.
+const SIDE_PX: f64 = 60.0;
 
 struct Case {
     img: GrayImage,
@@ -62,8 +70,7 @@ fn cases(w: u32, h: u32, n: usize, seed: u64) -> Vec<Case> {
                 rng.gen_range(0.25..0.75) * h as f64,
             );
             let ground = cam.pixel_to_ground_enu(u, v, &pose).expect("below horizon");
-            // A tag ~60 px wide at either resolution, as a tracker keeps it.
-            let side_px = 60.0;
+            let side_px = SIDE_PX;
             let tag_size_m = side_px * alt / cam.intrinsics.fx_px;
             let scene = SceneEnu {
                 target: Some(TargetAppearance {
@@ -99,19 +106,25 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Runs the benchmark on `frames` frames per resolution.
 pub fn run(frames: usize, seed: u64) -> Result<Vec<DetectBenchRow>, VisionError> {
-    let mut det = RoiSearch::new(AprilTagDetector::new(DetectorConfig::default())?);
+    let cfg = DetectorConfig::default();
+    let mut det = RoiSearch::new(AprilTagDetector::new(cfg.clone())?)
+        .with_max_full_frame_decimation(cfg.max_full_frame_decimation);
     let mut rows = Vec::new();
     for (w, h) in [(640, 480), (1280, 720)] {
         let cs = cases(w, h, frames.max(1), seed);
-        let (mut full_t, mut roi_t) = (Vec::new(), Vec::new());
-        let (mut full_found, mut roi_found, mut roi_hits) = (0, 0, 0);
+        let (mut full_t, mut coarse_t, mut roi_t) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut full_found, mut coarse_found, mut roi_found, mut roi_hits) = (0, 0, 0, 0);
         for c in &cs {
             let t = Instant::now();
-            let (d, _) = det.detect(&c.img, None, &[0])?;
+            let (d, _) = det.detect(&c.img, None, &[0], None)?;
             full_t.push(t.elapsed().as_secs_f64() * 1e3);
             full_found += usize::from(!d.is_empty());
             let t = Instant::now();
-            let (d, how) = det.detect(&c.img, Some(c.roi), &[0])?;
+            let (d, _) = det.detect(&c.img, None, &[0], Some(SIDE_PX))?;
+            coarse_t.push(t.elapsed().as_secs_f64() * 1e3);
+            coarse_found += usize::from(!d.is_empty());
+            let t = Instant::now();
+            let (d, how) = det.detect(&c.img, Some(c.roi), &[0], Some(SIDE_PX))?;
             roi_t.push(t.elapsed().as_secs_f64() * 1e3);
             roi_found += usize::from(!d.is_empty());
             roi_hits += usize::from(how == SearchOutcome::Roi);
@@ -121,8 +134,10 @@ pub fn run(frames: usize, seed: u64) -> Result<Vec<DetectBenchRow>, VisionError>
             height_px: h,
             frames: cs.len(),
             full_frame_ms: median(full_t),
+            coarse_ms: median(coarse_t),
             roi_ms: median(roi_t),
             full_frame_found: full_found,
+            coarse_found,
             roi_found,
             roi_hits,
         });
@@ -133,18 +148,21 @@ pub fn run(frames: usize, seed: u64) -> Result<Vec<DetectBenchRow>, VisionError>
 /// The table.
 pub fn render_table(rows: &[DetectBenchRow]) -> String {
     let mut s = String::from(
-        "| resolution | frames | AprilTag 3 full frame (ms) | ROI first (ms) | speed-up | found full / ROI (in ROI) |\n|---|---|---|---|---|---|\n",
+        "| resolution | frames | AprilTag 3 full frame (ms) | coarse full frame (ms) | ROI first (ms) | speed-up coarse / ROI | found full / coarse / ROI (in ROI) |\n|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         s += &format!(
-            "| {}x{} | {} | {:.2} | {:.2} | {:.1}x | {} / {} ({}) |\n",
+            "| {}x{} | {} | {:.2} | {:.2} | {:.2} | {:.1}x / {:.1}x | {} / {} / {} ({}) |\n",
             r.width_px,
             r.height_px,
             r.frames,
             r.full_frame_ms,
+            r.coarse_ms,
             r.roi_ms,
+            r.full_frame_ms / r.coarse_ms,
             r.full_frame_ms / r.roi_ms,
             r.full_frame_found,
+            r.coarse_found,
             r.roi_found,
             r.roi_hits
         );

@@ -56,6 +56,19 @@ pub trait TagDetector {
     fn name(&self) -> &'static str;
     /// All tags of the configured family in the image.
     fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, VisionError>;
+
+    /// As [`TagDetector::detect`], but quads may be searched on the image decimated by
+    /// `factor` when that is coarser than the configured decimation: for tags known to be
+    /// large in the image, where the fine search costs time and finds nothing more. A detector
+    /// without such a setting searches as `detect` does.
+    fn detect_decimated(
+        &mut self,
+        image: &GrayImage,
+        factor: f32,
+    ) -> Result<Vec<TagDetection>, VisionError> {
+        let _ = factor;
+        self.detect(image)
+    }
 }
 
 /// AprilTag detector settings.
@@ -74,6 +87,17 @@ pub struct DetectorConfig {
     pub min_decision_margin: f64,
     /// Detector threads.
     pub threads: u8,
+    /// The coarsest decimation the full-frame search may use when the tag is expected to be
+    /// large in the image (at least 16 px per decimated pixel row of the tag's side): the
+    /// full frame is where the time goes when the target is not where the filter predicts,
+    /// and edges are refined at full resolution either way. 1 or the `decimation` turns this
+    /// off.
+    #[serde(default = "default_max_full_frame_decimation")]
+    pub max_full_frame_decimation: f32,
+}
+
+fn default_max_full_frame_decimation() -> f32 {
+    4.0
 }
 
 impl Default for DetectorConfig {
@@ -84,6 +108,7 @@ impl Default for DetectorConfig {
             max_hamming: 1,
             min_decision_margin: 30.0,
             threads: 1,
+            max_full_frame_decimation: default_max_full_frame_decimation(),
         }
     }
 }
@@ -99,6 +124,12 @@ impl DetectorConfig {
         }
         if self.max_hamming > 2 {
             return Err(format!("max_hamming {} must be 0-2", self.max_hamming));
+        }
+        if !(self.max_full_frame_decimation >= 1.0 && self.max_full_frame_decimation <= 8.0) {
+            return Err(format!(
+                "max_full_frame_decimation {} must be 1-8",
+                self.max_full_frame_decimation
+            ));
         }
         if self.threads == 0 {
             return Err("threads must be at least 1".into());
@@ -132,6 +163,18 @@ impl AprilTagDetector {
 impl TagDetector for AprilTagDetector {
     fn name(&self) -> &'static str {
         "apriltag3"
+    }
+
+    fn detect_decimated(
+        &mut self,
+        image: &GrayImage,
+        factor: f32,
+    ) -> Result<Vec<TagDetection>, VisionError> {
+        let factor = factor.clamp(self.cfg.decimation, 8.0);
+        self.inner.set_decimation(factor);
+        let found = self.detect(image);
+        self.inner.set_decimation(self.cfg.decimation);
+        found
     }
 
     fn detect(&mut self, image: &GrayImage) -> Result<Vec<TagDetection>, VisionError> {
@@ -206,7 +249,15 @@ pub struct RoiSearch<D: TagDetector> {
     /// A region wider than this share of the image width is searched as the full frame
     /// (no saving left).
     pub max_roi_fraction: f64,
+    /// Coarsest decimation of the searches for a tag of known size
+    /// ([`DetectorConfig::max_full_frame_decimation`]); 1: never coarser than the detector's.
+    pub max_full_frame_decimation: f32,
 }
+
+/// Decimated pixels the tag's side keeps in a coarse full-frame search: the 10-cell tag36h11
+/// (with its white border) then has cells of at least 1.6 decimated px, which quad detection
+/// finds reliably; corners are refined at full resolution.
+pub const MIN_DECIMATED_TAG_SIDE_PX: f64 = 16.0;
 
 impl<D: TagDetector> RoiSearch<D> {
     /// Wraps a detector.
@@ -214,17 +265,40 @@ impl<D: TagDetector> RoiSearch<D> {
         Self {
             detector,
             max_roi_fraction: 0.6,
+            max_full_frame_decimation: 1.0,
         }
     }
 
-    /// Detections of `target_ids` (empty: any id), searching `roi` first.
+    /// With the full-frame search allowed to decimate up to `factor` for large tags.
+    pub fn with_max_full_frame_decimation(mut self, factor: f32) -> Self {
+        self.max_full_frame_decimation = factor.max(1.0);
+        self
+    }
+
+    fn search(&mut self, image: &GrayImage, coarse: f32) -> Result<Vec<TagDetection>, VisionError> {
+        if coarse > 1.0 {
+            self.detector.detect_decimated(image, coarse)
+        } else {
+            self.detector.detect(image)
+        }
+    }
+
+    /// Detections of `target_ids` (empty: any id), searching `roi` first, then the full
+    /// frame; both coarsely when the tag is expected to be `tag_side_px` wide, so that quads
+    /// are searched on an image decimated as far as the tag's size allows (at most
+    /// `max_full_frame_decimation`).
     pub fn detect(
         &mut self,
         image: &GrayImage,
         roi: Option<RoiPx>,
         target_ids: &[u32],
+        tag_side_px: Option<f64>,
     ) -> Result<(Vec<TagDetection>, SearchOutcome), VisionError> {
         let wanted = |d: &TagDetection| target_ids.is_empty() || target_ids.contains(&d.id);
+        let coarse = tag_side_px
+            .map(|side| (side / MIN_DECIMATED_TAG_SIDE_PX).floor() as f32)
+            .unwrap_or(1.0)
+            .min(self.max_full_frame_decimation);
         let roi = roi.filter(|r| 2.0 * r.half_px <= self.max_roi_fraction * image.width as f64);
         if let Some(RoiPx {
             center_px: c,
@@ -243,8 +317,7 @@ impl<D: TagDetector> RoiSearch<D> {
                     (y1 - y0) as usize,
                 );
                 let found: Vec<TagDetection> = self
-                    .detector
-                    .detect(&crop)?
+                    .search(&crop, coarse)?
                     .into_iter()
                     .filter(wanted)
                     .map(|d| d.shifted(x0, y0))
@@ -255,11 +328,61 @@ impl<D: TagDetector> RoiSearch<D> {
             }
         }
         let found = self
-            .detector
-            .detect(image)?
+            .search(image, coarse)?
             .into_iter()
             .filter(wanted)
             .collect();
         Ok((found, SearchOutcome::FullFrame))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Records the decimation of every search.
+    #[derive(Default)]
+    struct Recorder {
+        calls: Vec<Option<f32>>,
+    }
+
+    impl TagDetector for Recorder {
+        fn name(&self) -> &'static str {
+            "recorder"
+        }
+        fn detect(&mut self, _: &GrayImage) -> Result<Vec<TagDetection>, VisionError> {
+            self.calls.push(None);
+            Ok(vec![])
+        }
+        fn detect_decimated(
+            &mut self,
+            _: &GrayImage,
+            factor: f32,
+        ) -> Result<Vec<TagDetection>, VisionError> {
+            self.calls.push(Some(factor));
+            Ok(vec![])
+        }
+    }
+
+    #[test]
+    fn the_coarse_factor_follows_the_tag_size_up_to_the_limit() {
+        let img = GrayImage::new(640, 480, vec![0; 640 * 480]).unwrap();
+        let roi = Some(RoiPx::around([320.0, 240.0], 75.0, 5.0));
+        let mut s = RoiSearch::new(Recorder::default()).with_max_full_frame_decimation(4.0);
+        // A 75 px tag: 75 / 16 = 4.7 -> 4, in the region and in the full frame.
+        s.detect(&img, roi, &[0], Some(75.0)).unwrap();
+        // A 40 px tag: 2; a 20 px tag: 1, the detector's own setting.
+        s.detect(&img, None, &[0], Some(40.0)).unwrap();
+        s.detect(&img, None, &[0], Some(20.0)).unwrap();
+        // Size unknown: the detector's own setting.
+        s.detect(&img, None, &[0], None).unwrap();
+        assert_eq!(
+            s.detector.calls,
+            vec![Some(4.0), Some(4.0), Some(2.0), None, None]
+        );
+        // The limit at 1 turns it off.
+        let mut off = RoiSearch::new(Recorder::default());
+        off.detect(&img, None, &[0], Some(300.0)).unwrap();
+        assert_eq!(off.detector.calls, vec![None]);
     }
 }
