@@ -1,8 +1,9 @@
 //! The daemon's pipeline thread: the simulated world (target on its roads), the camera
 //! (rendered from the vehicle's reported pose), the detector, the particle filter with the
-//! DMMN, and EER guidance, on the wall clock at the configured rates. It runs on its own OS
-//! thread so that the DMMN, the filter and EER never block the async reactor; it talks to
-//! the async side only through [`Shared`].
+//! DMMN, and EER guidance, one physics tick per message from the supervisor (which ticks on
+//! the runtime's clock: wall-clock or simulated). It runs on its own OS thread so that the
+//! DMMN, the filter and EER never block the async reactor; it talks to the async side only
+//! through [`Shared`] and the tick channels.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
