@@ -14,7 +14,7 @@
 //! is no simulated target.
 //!
 //! Every timer here, in the link and in the mock is on tokio's clock and the pipeline is
-//! stepped by that clock ([`drive_pipeline`]): on a runtime whose time is paused
+//! stepped by that clock (one blocking task per tick): on a runtime whose time is paused
 //! ([`run_simulated`]) the whole daemon flies faster than real time through the same code.
 
 pub mod flight_log;
