@@ -219,6 +219,18 @@ fn packet_loss_link_cut_and_camera_freeze_inside_the_loop_are_survived() {
     );
     assert_eq!(r.final_mode, Some(Mode::Hold));
     assert_eq!(r.mock.as_ref().unwrap().with(|m| m.mode()), Mode::Hold);
+    // The log names the faults in force, the vehicle's mode and the entropy at each step.
+    assert!(during(5.5, 9.5).all(|x| x.faults == "loss=30"));
+    assert!(during(22.5, 25.5).all(|x| x.faults == "camera-freeze"));
+    assert!(during(28.0, 40.0).all(|x| x.faults.is_empty()));
+    let offboard = records
+        .iter()
+        .filter(|x| x.vehicle_mode == Some(Mode::Offboard))
+        .count();
+    assert!(offboard > records.len() / 2, "{offboard} steps in OFFBOARD");
+    assert!(records.last().unwrap().entropy.is_finite());
+    let csv = infotrack::daemon::flight_log::render(records, 7, "dmmn");
+    assert!(csv.contains(",Offboard,camera-freeze\n") && csv.contains(",loss=30\n"));
     // Blind steps (no frame) replay too.
     assert!(r.output.records.iter().any(|x| !x.frame));
     replays_exactly(&cfg, &r);

@@ -180,6 +180,35 @@ async fn px4_over_tcp() {
         (p[0] - 6.0).abs() < 0.5 && (p[1] + 3.0).abs() < 0.5,
         "{p:?}"
     );
+
+    // The vehicle end closes the stream (a companion-port restart): the link reports the
+    // vehicle lost, dials again until a vehicle listens there, and gets it back.
+    let mut events = link.events();
+    mock.stop();
+    let again = tokio::spawn(async move {
+        // Longer than the link's 3 s heartbeat timeout.
+        tokio::time::sleep(Duration::from_secs(4)).await;
+        spawn(
+            &format!("tcpin:127.0.0.1:{port}"),
+            MockConfig::new(Flavor::Px4),
+            Faults::default(),
+        )
+        .await
+    });
+    let mut seen = Vec::new();
+    let until = tokio::time::Instant::now() + Duration::from_secs(20);
+    while !seen.contains(&"back") && tokio::time::Instant::now() < until {
+        match tokio::time::timeout(Duration::from_millis(500), events.recv()).await {
+            Ok(Ok(LinkEvent::VehicleLost)) => seen.push("lost"),
+            Ok(Ok(LinkEvent::VehicleBack)) => seen.push("back"),
+            _ => {}
+        }
+    }
+    assert_eq!(seen, ["lost", "back"]);
+    let fresh = again.await.unwrap().unwrap();
+    // Both directions work on the new stream: a command is acknowledged.
+    link.request_telemetry().await.unwrap();
+    assert!(!fresh.with(|m| m.armed()));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

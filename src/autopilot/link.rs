@@ -11,8 +11,10 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::time::Instant;
 
+use super::connection::{is_dead_stream, Connection};
+
 use mavlink::dialects::ardupilotmega::*;
-use mavlink::{AsyncMavConnection, MavHeader, MavlinkVersion};
+use mavlink::MavHeader;
 use thiserror::Error;
 use tokio::sync::broadcast;
 use tokio::task::JoinHandle;
@@ -257,7 +259,7 @@ struct Streamer {
 /// A running link to one vehicle.
 pub struct VehicleLink {
     cfg: LinkConfig,
-    conn: Arc<mavlink::AsyncConnection<MavMessage>>,
+    conn: Arc<Connection>,
     state: Arc<Mutex<VehicleState>>,
     events: broadcast::Sender<LinkEvent>,
     heartbeat_paused: Arc<AtomicBool>,
@@ -281,17 +283,15 @@ impl VehicleLink {
             url: cfg.url.clone(),
             message,
         })?;
-        let mut conn = mavlink::connect_async::<MavMessage>(&cfg.url)
-            .await
-            .map_err(|e| LinkError::Connect {
-                url: cfg.url.clone(),
-                message: e.to_string(),
-            })?;
-        conn.set_protocol_version(MavlinkVersion::V2);
-        conn.set_allow_recv_any_version(true);
-        if let Some(key) = &cfg.signing_key {
-            conn.setup_signing(Some(key.config(cfg.signing_link_id)));
-        }
+        let conn = Connection::open(
+            &cfg.url,
+            cfg.signing_key.clone().map(|k| (k, cfg.signing_link_id)),
+        )
+        .await
+        .map_err(|e| LinkError::Connect {
+            url: cfg.url.clone(),
+            message: e.to_string(),
+        })?;
         let conn = Arc::new(conn);
         let tlog = match &cfg.tlog {
             Some(p) => Some(Arc::new(super::tlog::Tlog::create(p).map_err(|e| {
@@ -329,6 +329,10 @@ impl VehicleLink {
                                 t.record(&h, &m);
                             }
                             on_message(&state, &events, me, &h, &m)
+                        }
+                        Err(e) if conn.reopens() && is_dead_stream(&e) => {
+                            tracing::error!("link: {e}: the connection is gone; reopening");
+                            conn.reopen(|| false).await;
                         }
                         Err(e) => {
                             tracing::debug!("link: receive error: {e}");

@@ -12,8 +12,14 @@ use thiserror::Error;
 use super::pipeline::{Command, FlightRecord};
 use crate::world::geometry::Enu2;
 
-/// The header row.
-pub const HEADER: &str = "t_s,vehicle_n_m,vehicle_e_m,vehicle_d_m,roll_rad,pitch_rad,yaw_rad,frame,measured,meas_x_m,meas_y_m,est_x_m,est_y_m,cov_xx,cov_xy,cov_yy,n_eff,eer,state,command,cmd_x_m,cmd_y_m";
+/// The header row. Vehicle pose in MAVLink local NED (m, rad); measurement, estimate and
+/// command in world ENU (m); covariance in m^2; `entropy` at the latest EER decision;
+/// `vehicle_mode` as the autopilot reported it; `faults` the injected ones in force,
+/// `+`-joined (empty: none).
+pub const HEADER: &str = "t_s,vehicle_n_m,vehicle_e_m,vehicle_d_m,roll_rad,pitch_rad,yaw_rad,frame,measured,meas_x_m,meas_y_m,est_x_m,est_y_m,cov_xx,cov_xy,cov_yy,n_eff,eer,state,command,cmd_x_m,cmd_y_m,entropy,vehicle_mode,faults";
+
+/// The header of the first version (no entropy, mode or faults), still read.
+pub const HEADER_V1: &str = "t_s,vehicle_n_m,vehicle_e_m,vehicle_d_m,roll_rad,pitch_rad,yaw_rad,frame,measured,meas_x_m,meas_y_m,est_x_m,est_y_m,cov_xx,cov_xy,cov_yy,n_eff,eer,state,command,cmd_x_m,cmd_y_m";
 
 /// A flight log that cannot be read.
 #[derive(Debug, Error)]
@@ -62,7 +68,7 @@ pub fn render(records: &[FlightRecord], seed: u64, motion: &str) -> String {
         let c = &r.step.cov_m2;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.step.t_s,
             p.position_ned_m[0],
             p.position_ned_m[1],
@@ -84,7 +90,11 @@ pub fn render(records: &[FlightRecord], seed: u64, motion: &str) -> String {
             r.state.as_str(),
             cmd,
             cx,
-            cy
+            cy,
+            r.entropy,
+            r.vehicle_mode
+                .map_or_else(|| "unknown".to_string(), |m| format!("{m:?}")),
+            r.faults
         );
     }
     s
@@ -118,16 +128,17 @@ pub fn parse(text: &str, path: &str) -> Result<(u64, String, Vec<LoggedStep>), F
     }
     let seed = seed.ok_or_else(|| err(1, "no seed=N".into()))?;
     let motion = motion.ok_or_else(|| err(1, "no motion=NAME".into()))?;
-    match lines.next() {
-        Some((_, h)) if h == HEADER => {}
+    let fields = match lines.next() {
+        Some((_, h)) if h == HEADER => 25,
+        Some((_, h)) if h == HEADER_V1 => 22,
         _ => return Err(err(2, format!("expected the header `{HEADER}`"))),
-    }
+    };
     let mut steps = Vec::new();
     for (i, line) in lines {
         let n = i + 1;
         let f: Vec<&str> = line.split(',').collect();
-        if f.len() != 22 {
-            return Err(err(n, format!("{} fields, expected 22", f.len())));
+        if f.len() != fields {
+            return Err(err(n, format!("{} fields, expected {fields}", f.len())));
         }
         let num = |k: usize| -> Result<f64, FlightLogError> {
             f[k].parse::<f64>()
@@ -177,9 +188,12 @@ mod tests {
             e.contains("f.csv, line 1") && e.contains("not an infotrack flight log"),
             "{e}"
         );
-        let row =
-            "0.33,1,2,-1.2,0,0,0,1,1,0.5,0.6,0.5,0.6,0.01,0,0.01,400,0.1,tracking,goto,0.5,0.7";
+        let row = "0.33,1,2,-1.2,0,0,0,1,1,0.5,0.6,0.5,0.6,0.01,0,0.01,400,0.1,tracking,goto,0.5,0.7,3.2,Offboard,camera-freeze+loss=30";
         let (_, _, steps) = parse(&format!("{ok_head}{row}\n"), "f").unwrap();
+        // A log of the first version (22 fields) still reads.
+        let v1_row = row.splitn(23, ',').take(22).collect::<Vec<_>>().join(",");
+        let v1 = format!("# infotrack flight log seed=3 motion=cv\n{HEADER_V1}\n{v1_row}\n");
+        assert_eq!(parse(&v1, "f").unwrap().2, steps);
         assert_eq!(steps[0].vehicle_enu, Enu2::new(2.0, 1.0), "NED -> ENU");
         assert_eq!(steps[0].measurement_enu, Some(Enu2::new(0.5, 0.6)));
         assert_eq!(steps[0].command_enu, Some(Enu2::new(0.5, 0.7)));

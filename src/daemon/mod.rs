@@ -91,6 +91,17 @@ pub struct ScheduledFault {
     pub duration_s: f64,
 }
 
+impl FaultKind {
+    /// The name `--inject` takes (`camera-freeze`, `link-cut`, `loss=30`).
+    pub fn name(&self) -> String {
+        match self {
+            Self::CameraFreeze => "camera-freeze".into(),
+            Self::LinkCut => "link-cut".into(),
+            Self::PacketLoss(p) => format!("loss={p}"),
+        }
+    }
+}
+
 impl std::str::FromStr for ScheduledFault {
     type Err = String;
 
@@ -222,6 +233,7 @@ fn snapshot(link: &VehicleLink) -> Option<VehicleSnapshot> {
             yaw_rad: att[2] as f64,
         },
         link_lost: s.lost,
+        mode: s.mode,
     })
 }
 
@@ -393,7 +405,11 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
                 continue;
             }
             *active = on;
-            tracing::warn!("fault {:?} {}", f.kind, if on { "begins" } else { "ends" });
+            tracing::warn!(
+                "fault {} {}",
+                f.kind.name(),
+                if on { "begins" } else { "ends" }
+            );
             match (f.kind, mock.as_ref()) {
                 (FaultKind::CameraFreeze, _) => shared.camera_frozen.store(on, Ordering::Relaxed),
                 (FaultKind::LinkCut, Some(m)) if on => {
@@ -407,6 +423,14 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
                 _ => {}
             }
         }
+        let active: Vec<String> = opts
+            .faults
+            .iter()
+            .zip(&fault_active)
+            .filter(|(_, on)| **on)
+            .map(|(f, _)| f.kind.name())
+            .collect();
+        *shared.faults.lock().expect("shared poisoned") = active.join("+");
         let snap = snapshot(&link);
         *shared.vehicle.lock().expect("shared poisoned") = snap;
         if let (Some(sn), Some((at, _, _))) = (snap, link.state().local_ned) {

@@ -31,6 +31,8 @@ pub struct VehicleSnapshot {
     pub pose: VehiclePoseNed,
     /// No heartbeat for the link's timeout.
     pub link_lost: bool,
+    /// The flight mode the vehicle last reported.
+    pub mode: Option<crate::autopilot::modes::Mode>,
 }
 
 /// What the pipeline asks the vehicle to do.
@@ -92,6 +94,8 @@ pub struct Shared {
     pub status: Mutex<Option<Status>>,
     /// Ask the pipeline to finish.
     pub stop: AtomicBool,
+    /// Injected faults in force, `+`-joined (written by the supervisor, logged per step).
+    pub faults: Mutex<String>,
     /// The camera delivers nothing while set (fault injection: a frozen camera).
     pub camera_frozen: AtomicBool,
     /// Recent vehicle poses by arrival time (written by the async side), for frames from a
@@ -107,6 +111,7 @@ impl Shared {
             command: Mutex::new(None),
             status: Mutex::new(None),
             stop: AtomicBool::new(false),
+            faults: Mutex::new(String::new()),
             camera_frozen: AtomicBool::new(false),
             poses: Mutex::new(super::pose_history::PoseHistory::new(Duration::from_secs(
                 2,
@@ -128,6 +133,13 @@ pub struct FlightRecord {
     pub frame: bool,
     /// The command in force after this step.
     pub command: Option<Command>,
+    /// Entropy of the estimate at the latest EER decision (NaN before the first).
+    pub entropy: f64,
+    /// The flight mode the vehicle reported at this step.
+    pub vehicle_mode: Option<crate::autopilot::modes::Mode>,
+    /// Faults injected at this step (`camera-freeze`, `link-cut`, `loss=30`), `+`-joined;
+    /// empty: none.
+    pub faults: String,
 }
 
 /// What the pipeline produced.
@@ -517,6 +529,9 @@ impl Pipeline {
                 state: self.state,
                 frame: !frozen,
                 command: self.command,
+                entropy: self.entropy,
+                vehicle_mode: snapshot.and_then(|s| s.mode),
+                faults: shared.faults.lock().expect("shared poisoned").clone(),
             });
             *shared.status.lock().expect("shared poisoned") = Some(Status {
                 t_s: t,
