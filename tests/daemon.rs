@@ -63,9 +63,10 @@ fn check_flight(r: &daemon::DaemonReport) {
     );
     assert!(s.tracking_error_m.is_finite() && s.estimation_error_m.is_finite());
     assert!(s.cov_det.is_finite() && s.cov_det > 0.0);
-    // The sim gives EER/DMMN 0.29 m tracking, 0.16 m estimation, 63% FOV over 90 s runs.
+    // The issue asks for the target in view at least half the time. Over seeds 1-8 the
+    // closed loop gave 39-63 % (mean 56.6 %); seed 7, the config's, gives 61 %.
     assert!(
-        s.fov_percent >= 40.0,
+        s.fov_percent >= 50.0,
         "target in view {:.1}% of the time",
         s.fov_percent
     );
@@ -127,16 +128,24 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
     .unwrap();
     let c = &sim.results[0];
     let s = &r.summary;
-    for (name, flown, m) in [
-        ("tracking error", s.tracking_error_m, &c.tracking_error_m),
+    // Three runs underestimate the spread; the floors are the sd of 6 sim --vision runs
+    // (seed 7): 0.129 m, 0.175 m, 10.9 %.
+    for (name, flown, m, floor) in [
+        (
+            "tracking error",
+            s.tracking_error_m,
+            &c.tracking_error_m,
+            0.129,
+        ),
         (
             "estimation error",
             s.estimation_error_m,
             &c.estimation_error_m,
+            0.175,
         ),
-        ("%FOV", s.fov_percent, &c.fov_percent),
+        ("%FOV", s.fov_percent, &c.fov_percent, 10.9),
     ] {
-        let band = 3.0 * m.sd.max(0.2 * m.mean);
+        let band = 3.0 * m.sd.max(floor);
         eprintln!(
             "{name}: closed loop {flown:.3}, sim {:.3} +- {:.3}",
             m.mean, m.sd
@@ -271,16 +280,23 @@ async fn sigterm_leaves_the_vehicle_in_hold() {
         .stdout(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Wait until it is flying guided.
+    // Wait until it is flying guided at the scenario's start point (world ENU (-0.5, 0.5)
+    // at 1.2 m, i.e. NED (0.5, -0.5, -1.2)), where tracking begins.
     let mut flying = false;
-    for _ in 0..200 {
+    for _ in 0..300 {
         tokio::time::sleep(Duration::from_millis(100)).await;
-        if mock.with(|m| m.armed() && m.mode() == Mode::Guided && m.position_ned_m()[2] < -1.0) {
+        if mock.with(|m| {
+            let p = m.position_ned_m();
+            m.armed()
+                && m.mode() == Mode::Guided
+                && (p[0] - 0.5).hypot(p[1] + 0.5) < 0.1
+                && (p[2] + 1.2).abs() < 0.1
+        }) {
             flying = true;
             break;
         }
     }
-    assert!(flying, "the daemon never took off");
+    assert!(flying, "the daemon never reached the start point");
     tokio::time::sleep(Duration::from_secs(3)).await;
     let pid = child.id().unwrap() as i32;
     // SAFETY: sending a signal to our own child process.
@@ -292,6 +308,50 @@ async fn sigterm_leaves_the_vehicle_in_hold() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}");
     assert!(stdout.contains("stopped by Signal"), "{stdout}");
+    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_during_takeoff_holds_and_says_so() {
+    let port = free_udp_port();
+    let mock = spawn(
+        &format!("udpin:127.0.0.1:{port}"),
+        MockConfig::new(Flavor::Px4),
+        Faults::default(),
+    )
+    .await
+    .unwrap();
+    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .args(["run", "--quiet", "--vehicle"])
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut armed = false;
+    for _ in 0..300 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        if mock.with(|m| m.armed()) {
+            armed = true;
+            break;
+        }
+    }
+    assert!(armed, "the daemon never armed");
+    // SAFETY: sending a signal to our own child process.
+    assert_eq!(
+        unsafe { libc::kill(child.id().unwrap() as i32, libc::SIGTERM) },
+        0
+    );
+    let out = tokio::time::timeout(Duration::from_secs(20), child.wait_with_output())
+        .await
+        .expect("the daemon did not stop")
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("during takeoff") && stderr.contains("hold"),
+        "{stderr}"
+    );
     assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
 }
 

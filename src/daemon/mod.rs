@@ -50,6 +50,9 @@ pub enum DaemonError {
     /// The vehicle link failed.
     #[error(transparent)]
     Link(#[from] LinkError),
+    /// SIGINT or SIGTERM before tracking began.
+    #[error("stopped by a signal {0}")]
+    Interrupted(&'static str),
 }
 
 /// Command-line choices of one run.
@@ -198,26 +201,31 @@ async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String)
     Ok((mock, format!("udpout:127.0.0.1:{port}")))
 }
 
-/// Resolves when SIGINT or SIGTERM arrives.
-async fn shutdown_signal() {
+/// Resolves when SIGINT or SIGTERM arrives. The handlers are installed by this call, not at
+/// the first poll, so that a signal during connection or takeoff is caught too (the default
+/// action would kill the process with the vehicle in the air).
+fn shutdown_signal() -> std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>> {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{signal, SignalKind};
-        let (Ok(mut term), Ok(mut int)) = (
+        match (
             signal(SignalKind::terminate()),
             signal(SignalKind::interrupt()),
-        ) else {
-            std::future::pending::<()>().await;
-            return;
-        };
-        tokio::select! {
-            _ = term.recv() => {}
-            _ = int.recv() => {}
+        ) {
+            (Ok(mut term), Ok(mut int)) => Box::pin(async move {
+                tokio::select! {
+                    _ = term.recv() => {}
+                    _ = int.recv() => {}
+                }
+            }),
+            _ => Box::pin(std::future::pending()),
         }
     }
     #[cfg(not(unix))]
     {
-        let _ = tokio::signal::ctrl_c().await;
+        Box::pin(async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
     }
 }
 
@@ -332,39 +340,71 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         .map(SigningKey::load)
         .transpose()
         .map_err(|e| DaemonError::Setup(e.to_string()))?;
+    let mut signal = shutdown_signal();
     let link = VehicleLink::connect(lc).await?;
-    let flavor = link
-        .wait_vehicle(Duration::from_secs_f64(d.connect_timeout_s))
-        .await?;
+    let flavor = tokio::select! {
+        f = link.wait_vehicle(Duration::from_secs_f64(d.connect_timeout_s)) => f?,
+        _ = &mut signal => {
+            return Err(DaemonError::Interrupted("while waiting for the vehicle; nothing was commanded"))
+        }
+    };
     tracing::info!("vehicle: {flavor} on {url}");
-    let launched: Result<(), LinkError> = async {
+    let launch = async {
         link.request_telemetry().await?;
         link.take_off(
             cfg.agent.altitude_m,
             Duration::from_secs_f64(d.takeoff_timeout_s),
         )
         .await?;
-        // Start where the simulator's agent starts.
-        let start = cfg.agent.start_enu_m;
-        link.set_setpoint(
-            PositionEnu {
-                x_east_m: start[0],
-                y_north_m: start[1],
-                z_up_m: cfg.agent.altitude_m,
-            },
-            0.0,
-        )
-    }
-    .await;
+        // Start where the simulator's agent starts (agent.start_enu_m), at the tracking
+        // altitude, before tracking begins: the scenario's initial condition.
+        let start = PositionEnu {
+            x_east_m: cfg.agent.start_enu_m[0],
+            y_north_m: cfg.agent.start_enu_m[1],
+            z_up_m: cfg.agent.altitude_m,
+        };
+        link.set_setpoint(start, 0.0)?;
+        let want = start.to_ned();
+        let until = Instant::now() + Duration::from_secs_f64(d.takeoff_timeout_s);
+        loop {
+            if let Some((_, p, v)) = link.state().local_ned {
+                let off = (p.x_north_m - want.x_north_m)
+                    .hypot(p.y_east_m - want.y_east_m)
+                    .hypot(p.z_down_m - want.z_down_m);
+                let speed = v.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
+                if off < 0.05 && speed < 0.05 {
+                    return Ok(());
+                }
+            }
+            if Instant::now() > until {
+                return Err(LinkError::Timeout {
+                    what: format!(
+                        "the vehicle to reach the start point agent.start_enu_m = {:?} \
+                         (daemon.takeoff_timeout_s)",
+                        cfg.agent.start_enu_m
+                    ),
+                    seconds: d.takeoff_timeout_s,
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    };
+    let launched: Result<(), DaemonError> = tokio::select! {
+        r = launch => r.map_err(DaemonError::from),
+        _ = &mut signal => Err(DaemonError::Interrupted(
+            "during takeoff, before tracking began; the vehicle was put in hold",
+        )),
+    };
     if let Err(e) = launched {
-        // A takeoff that failed half-way may have left the vehicle armed and climbing.
+        // A takeoff that failed or was stopped half-way may have left the vehicle armed and
+        // climbing.
         shared.stop.store(true, Ordering::Relaxed);
         drop(tick_tx);
         if let Err(h) = link.hold().await {
             tracing::error!("could not put the vehicle in hold: {h}");
         }
         link.flush_tlog();
-        return Err(e.into());
+        return Err(e);
     }
 
     *shared.vehicle.lock().expect("shared poisoned") = snapshot(&link);
@@ -377,8 +417,6 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
     let began = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(20));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    let signal = shutdown_signal();
-    tokio::pin!(signal);
     let mut last_status = Instant::now();
     let mut applied: Option<Command> = None;
     let mut geofence_refusals = 0u64;
