@@ -215,3 +215,58 @@ fn bench_prints_the_table_and_json() {
     }
     assert!(v["eer_candidates"].as_u64().unwrap() >= 256);
 }
+
+#[test]
+fn sim_closed_loop_flies_the_daemon_on_the_simulated_clock() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("flight");
+    let o = infotrack()
+        .args(["sim", "--closed-loop", "--duration", "20", "--seed", "7"])
+        .arg("--out")
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        stdout.contains("closed loop | px4 vehicle at mock:px4"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("stopped by Duration"), "{stdout}");
+    // 20 s of flight: 60 filter steps at 3 Hz (the one at exactly 20 s may fall after the
+    // stop). How much faster than real time it runs is a benchmark, not a test.
+    assert!(
+        stdout.contains("| 59 filter steps") || stdout.contains("| 60 filter steps"),
+        "{stdout}"
+    );
+    for f in [
+        "steps.csv",
+        "flight.csv",
+        "link.tlog",
+        "scene.png",
+        "summary.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    // Refusals name what is wrong.
+    for (args, want) in [
+        (vec!["--runs", "3"], "one run"),
+        (vec!["--guidance", "pfwm"], "can only be eer"),
+        (vec!["--motion", "kf"], "daemon.motion"),
+        (vec!["--vision"], "do not apply"),
+    ] {
+        let o = infotrack()
+            .args(["sim", "--closed-loop"])
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(!o.status.success());
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(e.contains(want), "{args:?}: {e}");
+    }
+}
