@@ -14,12 +14,11 @@ use infotrack::autopilot::modes::{Flavor, Mode};
 use infotrack::autopilot::tlog;
 use infotrack::config::Config;
 use infotrack::daemon::{self, RunOptions, StopReason};
-use infotrack::mock::server::{spawn, Faults};
 use infotrack::mock::MockConfig;
 use mavlink::dialects::ardupilotmega::MavMessage;
 
 mod common;
-use common::free_udp_port;
+use common::{eventually, free_udp_port, sigterm, udp_mock};
 
 fn opts(duration_s: f64, tlog: Option<std::path::PathBuf>) -> RunOptions {
     RunOptions {
@@ -265,14 +264,7 @@ fn fault_specs_parse_with_clear_errors() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sigterm_leaves_the_vehicle_in_hold() {
-    let port = free_udp_port();
-    let mock = spawn(
-        &format!("udpin:127.0.0.1:{port}"),
-        MockConfig::new(Flavor::ArduPilot),
-        Faults::default(),
-    )
-    .await
-    .unwrap();
+    let (mock, port) = udp_mock(MockConfig::new(Flavor::ArduPilot)).await;
     let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
         .args(["run", "--quiet", "--duration", "120", "--vehicle"])
         .arg(format!("udpout:127.0.0.1:{port}"))
@@ -282,29 +274,19 @@ async fn sigterm_leaves_the_vehicle_in_hold() {
         .unwrap();
     // Wait until it is flying guided at the scenario's start point (world ENU (-0.5, 0.5)
     // at 1.2 m, i.e. NED (0.5, -0.5, -1.2)), where tracking begins.
-    let mut flying = false;
-    for _ in 0..300 {
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        if mock.with(|m| {
+    let at_start = eventually(30.0, || {
+        mock.with(|m| {
             let p = m.position_ned_m();
             m.armed()
                 && m.mode() == Mode::Guided
                 && (p[0] - 0.5).hypot(p[1] + 0.5) < 0.1
                 && (p[2] + 1.2).abs() < 0.1
-        }) {
-            flying = true;
-            break;
-        }
-    }
-    assert!(flying, "the daemon never reached the start point");
+        })
+    })
+    .await;
+    assert!(at_start, "the daemon never reached the start point");
     tokio::time::sleep(Duration::from_secs(3)).await;
-    let pid = child.id().unwrap() as i32;
-    // SAFETY: sending a signal to our own child process.
-    assert_eq!(unsafe { libc::kill(pid, libc::SIGTERM) }, 0);
-    let out = tokio::time::timeout(Duration::from_secs(20), child.wait_with_output())
-        .await
-        .expect("the daemon did not stop")
-        .unwrap();
+    let out = sigterm(child).await;
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}");
     assert!(stdout.contains("stopped by Signal"), "{stdout}");
@@ -313,14 +295,7 @@ async fn sigterm_leaves_the_vehicle_in_hold() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sigterm_during_takeoff_holds_and_says_so() {
-    let port = free_udp_port();
-    let mock = spawn(
-        &format!("udpin:127.0.0.1:{port}"),
-        MockConfig::new(Flavor::Px4),
-        Faults::default(),
-    )
-    .await
-    .unwrap();
+    let (mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
     let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
         .args(["run", "--quiet", "--vehicle"])
         .arg(format!("udpout:127.0.0.1:{port}"))
@@ -328,24 +303,11 @@ async fn sigterm_during_takeoff_holds_and_says_so() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut armed = false;
-    for _ in 0..300 {
-        tokio::time::sleep(Duration::from_millis(50)).await;
-        if mock.with(|m| m.armed()) {
-            armed = true;
-            break;
-        }
-    }
-    assert!(armed, "the daemon never armed");
-    // SAFETY: sending a signal to our own child process.
-    assert_eq!(
-        unsafe { libc::kill(child.id().unwrap() as i32, libc::SIGTERM) },
-        0
+    assert!(
+        eventually(15.0, || mock.with(|m| m.armed())).await,
+        "the daemon never armed"
     );
-    let out = tokio::time::timeout(Duration::from_secs(20), child.wait_with_output())
-        .await
-        .expect("the daemon did not stop")
-        .unwrap();
+    let out = sigterm(child).await;
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
@@ -561,12 +523,9 @@ fn field_configs_load_and_name_their_camera_when_it_is_missing() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_refused_takeoff_is_a_clear_error_and_leaves_the_vehicle_in_hold() {
     // A vehicle whose estimator never settles refuses to arm.
-    let port = free_udp_port();
     let mut mc = MockConfig::new(Flavor::Px4);
     mc.estimator_ready_after_s = 1e6;
-    let mock = spawn(&format!("udpin:127.0.0.1:{port}"), mc, Faults::default())
-        .await
-        .unwrap();
+    let (mock, port) = udp_mock(mc).await;
     let mut cfg = lab();
     cfg.daemon.vehicle = format!("udpout:127.0.0.1:{port}");
     let err = daemon::run(&cfg, &opts(10.0, None))

@@ -17,7 +17,7 @@ use mavlink::{MavHeader, MavlinkVersion};
 use rand::{Rng, SeedableRng};
 
 mod common;
-use common::{expect_failsafe, fly_to, free_udp_port};
+use common::{expect_failsafe, fly_to, free_udp_port, udp_mock};
 
 fn link_cfg(url: &str, sysid: u8) -> LinkConfig {
     let mut cfg = LinkConfig::new(url);
@@ -213,14 +213,7 @@ async fn px4_over_tcp() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn malformed_udp_datagrams_wedge_neither_side() {
-    let port = free_udp_port();
-    let mock = spawn(
-        &format!("udpin:127.0.0.1:{port}"),
-        MockConfig::new(Flavor::ArduPilot),
-        Faults::default(),
-    )
-    .await
-    .unwrap();
+    let (mock, port) = udp_mock(MockConfig::new(Flavor::ArduPilot)).await;
     let link = connect(
         link_cfg(&format!("udpout:127.0.0.1:{port}"), 1),
         Flavor::ArduPilot,

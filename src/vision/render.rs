@@ -139,24 +139,33 @@ fn radiance(scene: &SceneEnu, x: f64, y: f64) -> f64 {
 
 const SKY: f64 = 210.0;
 
+/// The ground point, world ENU, seen along the ray through pixel coordinates (u, v) (pixel
+/// centres at integers); None for a ray that does not reach the ground.
+fn ground_caster<'a>(
+    cam: &'a CameraModel,
+    pose: &VehiclePoseNed,
+) -> impl Fn(f64, f64) -> Option<[f64; 2]> + Sync + 'a {
+    let (c, r_nc) = cam.camera_in_ned(pose);
+    move |u: f64, v: f64| {
+        let (x, y) = cam.intrinsics.unproject(u, v);
+        let d = r_nc * nalgebra::Vector3::new(x, y, 1.0);
+        if d.z <= 1e-9 || c.z >= 0.0 {
+            return None;
+        }
+        let t = -c.z / d.z;
+        // NED ground point -> ENU.
+        Some([c.y + t * d.y, c.x + t * d.x])
+    }
+}
+
 /// Radiance along the ray through pixel coordinates (u, v) (pixel centres at integers).
 fn ray_sampler<'a>(
     cam: &'a CameraModel,
     pose: &VehiclePoseNed,
     scene: &'a SceneEnu,
 ) -> impl Fn(f64, f64) -> f64 + Sync + 'a {
-    let (c, r_nc) = cam.camera_in_ned(pose);
-    move |u: f64, v: f64| -> f64 {
-        let (x, y) = cam.intrinsics.unproject(u, v);
-        let d = r_nc * nalgebra::Vector3::new(x, y, 1.0);
-        if d.z <= 1e-9 || c.z >= 0.0 {
-            SKY
-        } else {
-            let t = -c.z / d.z;
-            // NED ground point -> ENU.
-            radiance(scene, c.y + t * d.y, c.x + t * d.x)
-        }
-    }
+    let cast = ground_caster(cam, pose);
+    move |u: f64, v: f64| cast(u, v).map_or(SKY, |g| radiance(scene, g[0], g[1]))
 }
 
 /// Renders the camera's view. `noise_seed` drives the sensor noise only.
@@ -276,16 +285,10 @@ fn corner_radiance(
     let (nbx, nby) = (w.div_ceil(b), h.div_ceil(b));
     let xs: Vec<usize> = (0..=nbx).map(|i| (i * b).min(w)).collect();
     let ys: Vec<usize> = (0..=nby).map(|j| (j * b).min(h)).collect();
-    let (c, r_nc) = cam.camera_in_ned(pose);
+    let cast = ground_caster(cam, pose);
     // Ground point (world ENU) and what is there, at a pixel corner.
     let look = |u: usize, v: usize| -> Seen {
-        let (x, y) = cam.intrinsics.unproject(u as f64 - 0.5, v as f64 - 0.5);
-        let d = r_nc * nalgebra::Vector3::new(x, y, 1.0);
-        if d.z <= 1e-9 || c.z >= 0.0 {
-            return None;
-        }
-        let t = -c.z / d.z;
-        let g = [c.y + t * d.y, c.x + t * d.x];
+        let g = cast(u as f64 - 0.5, v as f64 - 0.5)?;
         let p = Enu2::new(g[0], g[1]);
         let class = if let Some(i) = scene.occluders.iter().position(|o| o.contains(&p)) {
             2 + i.min(250) as u8
@@ -303,8 +306,8 @@ fn corner_radiance(
     let coarse: Vec<(f64, Seen)> = (0..(nbx + 1) * (nby + 1))
         .into_par_iter()
         .map(|i| {
-            let (u, v) = (xs[i % (nbx + 1)], ys[i / (nbx + 1)]);
-            (sample(u as f64 - 0.5, v as f64 - 0.5), look(u, v))
+            let seen = look(xs[i % (nbx + 1)], ys[i / (nbx + 1)]);
+            (seen.map_or(SKY, |(g, _)| radiance(scene, g[0], g[1])), seen)
         })
         .collect();
     let at = |i: usize, j: usize| &coarse[j * (nbx + 1) + i];
@@ -338,7 +341,7 @@ fn corner_radiance(
         }
     };
     // Walk every outline on the ground in steps of under a quarter block.
-    let height_m = (-c.z).max(1e-3);
+    let height_m = (-cam.camera_in_ned(pose).0.z).max(1e-3);
     let step_m = 0.25 * b as f64 * height_m / cam.intrinsics.fx_px.max(cam.intrinsics.fy_px);
     let mut outline = |a: [f64; 2], z: [f64; 2]| {
         let n = (((z[0] - a[0]).hypot(z[1] - a[1]) / step_m).ceil() as usize).clamp(1, 100_000);

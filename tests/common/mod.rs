@@ -64,3 +64,41 @@ pub async fn expect_failsafe(
         .iter()
         .any(|(_, to)| *to == want));
 }
+
+/// A mock autopilot listening on a free loopback UDP port, without faults; and the port.
+pub async fn udp_mock(
+    cfg: infotrack::mock::MockConfig,
+) -> (infotrack::mock::server::MockHandle, u16) {
+    let port = free_udp_port();
+    let mock = infotrack::mock::server::spawn(
+        &format!("udpin:127.0.0.1:{port}"),
+        cfg,
+        infotrack::mock::server::Faults::default(),
+    )
+    .await
+    .unwrap();
+    (mock, port)
+}
+
+/// Polls `pred` every 50 ms for at most `secs`; whether it came true.
+pub async fn eventually(secs: f64, pred: impl Fn() -> bool) -> bool {
+    let until = tokio::time::Instant::now() + Duration::from_secs_f64(secs);
+    while tokio::time::Instant::now() < until {
+        if pred() {
+            return true;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    pred()
+}
+
+/// Sends SIGTERM to a child process and waits (at most 20 s) for it to exit.
+pub async fn sigterm(child: tokio::process::Child) -> std::process::Output {
+    let pid = child.id().expect("the child is running") as i32;
+    // SAFETY: sending a signal to our own child process.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGTERM) }, 0);
+    tokio::time::timeout(Duration::from_secs(20), child.wait_with_output())
+        .await
+        .expect("the process did not stop on SIGTERM")
+        .unwrap()
+}
