@@ -365,24 +365,31 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
         };
         link.set_setpoint(start, 0.0)?;
         let want = start.to_ned();
-        link.wait_for(
-            |s| {
-                s.local_ned.is_some_and(|(_, p, v)| {
-                    let off = (p.x_north_m - want.x_north_m)
-                        .hypot(p.y_east_m - want.y_east_m)
-                        .hypot(p.z_down_m - want.z_down_m);
-                    let speed = v.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
-                    off < 0.05 && speed < 0.05
-                })
-            },
-            &format!(
-                "the vehicle to reach the start point agent.start_enu_m = {:?} \
-                 (daemon.takeoff_timeout_s)",
-                cfg.agent.start_enu_m
-            ),
-            Duration::from_secs_f64(d.takeoff_timeout_s),
-        )
-        .await
+        // Not VehicleLink::wait_for: that polls every 20 ms, and the instant tracking begins
+        // decides the simulated flights (and the recorded numbers of each seed).
+        let until = Instant::now() + Duration::from_secs_f64(d.takeoff_timeout_s);
+        loop {
+            if let Some((_, p, v)) = link.state().local_ned {
+                let off = (p.x_north_m - want.x_north_m)
+                    .hypot(p.y_east_m - want.y_east_m)
+                    .hypot(p.z_down_m - want.z_down_m);
+                let speed = v.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
+                if off < 0.05 && speed < 0.05 {
+                    return Ok(());
+                }
+            }
+            if Instant::now() > until {
+                return Err(LinkError::Timeout {
+                    what: format!(
+                        "the vehicle to reach the start point agent.start_enu_m = {:?} \
+                         (daemon.takeoff_timeout_s)",
+                        cfg.agent.start_enu_m
+                    ),
+                    seconds: d.takeoff_timeout_s,
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
     };
     let launched: Result<(), DaemonError> = tokio::select! {
         r = launch => r.map_err(DaemonError::from),
