@@ -439,12 +439,14 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
             break StopReason::Fault;
         }
         let now_s = began.elapsed().as_secs_f64();
+        let mut toggled = false;
         for (f, active) in opts.faults.iter().zip(fault_active.iter_mut()) {
             let on = now_s >= f.at_s && now_s < f.at_s + f.duration_s;
             if on == *active {
                 continue;
             }
             *active = on;
+            toggled = true;
             tracing::warn!(
                 "fault {} {}",
                 f.kind.name(),
@@ -463,14 +465,16 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
                 _ => {}
             }
         }
-        let active: Vec<String> = opts
-            .faults
-            .iter()
-            .zip(&fault_active)
-            .filter(|(_, on)| **on)
-            .map(|(f, _)| f.kind.name())
-            .collect();
-        *shared.faults.lock().expect("shared poisoned") = active.join("+");
+        if toggled {
+            let active: Vec<String> = opts
+                .faults
+                .iter()
+                .zip(&fault_active)
+                .filter(|(_, on)| **on)
+                .map(|(f, _)| f.kind.name())
+                .collect();
+            *shared.faults.lock().expect("shared poisoned") = active.join("+");
+        }
         let snap = snapshot(&link);
         *shared.vehicle.lock().expect("shared poisoned") = snap;
         if let (Some(sn), Some((at, _, _))) = (snap, link.state().local_ned) {
