@@ -2,7 +2,8 @@
 //! excluded) at N_H = 25, 100, 500 with K = 4. `infotrack bench` times the same fixtures.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use infotrack::bench::{EerFixture, PfFixture};
+mod fixtures;
+use fixtures::{EerFixture, PfFixture};
 
 fn pf_step(c: &mut Criterion) {
     let mut g = c.benchmark_group("pf_step_cv");

@@ -19,10 +19,10 @@
 #![deny(missing_docs)]
 
 pub mod autopilot;
-pub mod bench;
 pub mod config;
 pub mod daemon;
 pub mod estimation;
+pub mod frames;
 pub mod guidance;
 pub mod metrics;
 pub mod mock;
@@ -30,5 +30,7 @@ pub mod motion;
 pub mod report;
 pub mod rng;
 pub mod sim;
+pub mod simulated;
+pub mod tracker;
 pub mod vision;
 pub mod world;

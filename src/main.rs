@@ -10,7 +10,6 @@ use infotrack::config::Config;
 use infotrack::guidance::GuidanceKind;
 use infotrack::report;
 use infotrack::sim::{EstimatorKind, MonteCarlo};
-use infotrack::world::World;
 
 #[derive(Parser)]
 #[command(
@@ -204,8 +203,9 @@ struct BenchArgs {
     vision: bool,
 }
 
-mod detect;
-mod run_cmd;
+mod cli;
+
+use cli::{detect, run_cmd};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -352,7 +352,7 @@ fn sim(a: SimArgs) -> Result<()> {
         println!("wrote {}", p.display());
     }
     if let Some(dir) = &a.out {
-        let world = World::from_config(&cfg);
+        let world = cfg.world();
         for ((g, m), outs) in &result.outputs {
             let sub = dir.join(format!("{g}_{m}"));
             for (r, out) in outs.iter().enumerate() {
@@ -388,16 +388,16 @@ fn bench(a: BenchArgs) -> Result<()> {
         bail!("--repetitions must be at least 1");
     }
     if a.vision {
-        let rows = infotrack::vision::detect_bench::run(a.repetitions, a.seed)?;
-        print!("{}", infotrack::vision::detect_bench::render_table(&rows));
+        let rows = cli::detect_bench::run(a.repetitions, a.seed)?;
+        print!("{}", cli::detect_bench::render_table(&rows));
         if let Some(p) = &a.json {
             report::write_json(p, &rows)?;
             println!("wrote {}", p.display());
         }
         return Ok(());
     }
-    let r = infotrack::bench::run(a.repetitions, a.seed, &a.model);
-    print!("{}", infotrack::bench::render(&r));
+    let r = cli::bench::run(a.repetitions, a.seed, &a.model);
+    print!("{}", cli::bench::render(&r));
     if let Some(p) = &a.json {
         report::write_json(p, &r)?;
         println!("wrote {}", p.display());

@@ -258,7 +258,7 @@ fn fault_specs_parse_with_clear_errors() {
         "link-cut@-1+2",
     ] {
         let e = bad.parse::<ScheduledFault>().unwrap_err();
-        assert!(e.contains("KIND@START+DURATION"), "{bad}: {e}");
+        assert!(e.to_string().contains("KIND@START+DURATION"), "{bad}: {e}");
     }
 }
 

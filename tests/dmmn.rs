@@ -37,7 +37,7 @@ fn flatten_f32(rows: &serde_json::Value) -> Vec<f32> {
 #[test]
 fn rust_outputs_match_pytorch_within_1e_4() {
     let c = lab_config();
-    let mut m = Dmmn::load(&c.motion.dmmn_model, &c).unwrap();
+    let mut m = Dmmn::load(&c.motion.dmmn_model, &c.motion_params()).unwrap();
     let fixture: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(root().join("models/dmmn_parity.json")).unwrap(),
     )
@@ -76,7 +76,7 @@ fn a_target_driving_straight_is_predicted_ahead() {
     // On the road from B (0.35, -0.6) north to C (0.35, 1.0) at 0.1 m per step, the next
     // position is about 0.1 m further north.
     let c = lab_config();
-    let mut m = Dmmn::load(&c.motion.dmmn_model, &c).unwrap();
+    let mut m = Dmmn::load(&c.motion.dmmn_model, &c.motion_params()).unwrap();
     let mut h = Histories::new(1, 10);
     for k in 0..10 {
         h.push(&[Enu2::new(0.35, -0.4 + 0.1 * k as f64)]);
@@ -94,7 +94,7 @@ fn a_target_driving_straight_is_predicted_ahead() {
 fn metadata_that_disagrees_with_the_config_is_refused() {
     let mut c = lab_config();
     c.filter.history_len = 8;
-    let err = Dmmn::load(&c.motion.dmmn_model, &c)
+    let err = Dmmn::load(&c.motion.dmmn_model, &c.motion_params())
         .unwrap_err()
         .to_string();
     assert!(
@@ -103,7 +103,7 @@ fn metadata_that_disagrees_with_the_config_is_refused() {
     );
     let mut c = lab_config();
     c.timing.filter_hz = 5.0;
-    let err = Dmmn::load(&c.motion.dmmn_model, &c)
+    let err = Dmmn::load(&c.motion.dmmn_model, &c.motion_params())
         .unwrap_err()
         .to_string();
     assert!(err.contains("timing.filter_hz"), "{err}");
@@ -112,7 +112,7 @@ fn metadata_that_disagrees_with_the_config_is_refused() {
 #[test]
 fn missing_model_and_wrong_shape_are_clear_errors() {
     let c = lab_config();
-    let err = Dmmn::load(Path::new("/nonexistent/dmmn.onnx"), &c)
+    let err = Dmmn::load(Path::new("/nonexistent/dmmn.onnx"), &c.motion_params())
         .unwrap_err()
         .to_string();
     assert!(
@@ -120,7 +120,9 @@ fn missing_model_and_wrong_shape_are_clear_errors() {
         "{err}"
     );
     let bad = root().join("tests/fixtures/dmmn_k5.onnx");
-    let err = Dmmn::load(&bad, &c).unwrap_err().to_string();
+    let err = Dmmn::load(&bad, &c.motion_params())
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("dmmn_k5.onnx") && err.contains("expected f32 [-1, 10, 2]"),
         "{err}"

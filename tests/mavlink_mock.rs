@@ -3,10 +3,10 @@
 
 use std::time::Duration;
 
-use infotrack::autopilot::frames::PositionEnu;
 use infotrack::autopilot::link::{LinkConfig, VehicleLink};
 use infotrack::autopilot::modes::{Flavor, Mode};
 use infotrack::autopilot::params_file::ParamType;
+use infotrack::frames::PositionEnu;
 use infotrack::mock::server::{spawn, Faults};
 use infotrack::mock::{MockConfig, MockEvent};
 

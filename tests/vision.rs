@@ -371,9 +371,8 @@ fn the_simulator_in_vision_mode_measures_through_rendered_frames() {
     use infotrack::config::Config;
     use infotrack::guidance::GuidanceKind;
     use infotrack::sim::run::{run_once, EstimatorKind, RunSpec};
-    use infotrack::world::World;
     let cfg = Config::default_lab();
-    let world = World::from_config(&cfg);
+    let world = cfg.world();
     let spec = RunSpec {
         guidance: GuidanceKind::Truth,
         estimator: EstimatorKind::parse("cv").unwrap(),

@@ -19,11 +19,11 @@ use thiserror::Error;
 use tokio::sync::broadcast;
 use tokio::task::JoinHandle;
 
-use super::frames::{yaw_enu_to_ned, PositionEnu, PositionNed};
 use super::modes::{Flavor, Mode};
 use super::params_file::{decode_wire, encode_wire, ParamType};
+use super::params_file::{mav_param_type_of, param_type_of};
 use super::signing::SigningKey;
-use crate::mock::autopilot::{mav_param_type_of, param_type_of};
+use crate::frames::{yaw_enu_to_ned, PositionEnu, PositionNed};
 use crate::world::geometry::BoundsEnu;
 
 /// Why a link operation failed.
@@ -140,8 +140,17 @@ impl LinkConfig {
     }
 }
 
+/// A MAVLink connection URL that is not one, and why.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("{0}")]
+pub struct BadUrl(pub String);
+
 /// Checks a connection URL before handing it to the transport, for a clear error.
-pub fn check_url(url: &str) -> Result<(), String> {
+pub fn check_url(url: &str) -> Result<(), BadUrl> {
+    url_reason(url).map_err(BadUrl)
+}
+
+fn url_reason(url: &str) -> Result<(), String> {
     let (scheme, rest) = url.split_once(':').ok_or_else(|| {
         "expected SCHEME:ADDRESS, e.g. udpin:0.0.0.0:14540 or serial:/dev/ttyAMA0:921600"
             .to_string()
@@ -279,9 +288,9 @@ impl Drop for VehicleLink {
 impl VehicleLink {
     /// Opens the connection and starts the reader, heartbeat and (idle) setpoint tasks.
     pub async fn connect(cfg: LinkConfig) -> Result<Self, LinkError> {
-        check_url(&cfg.url).map_err(|message| LinkError::Connect {
+        check_url(&cfg.url).map_err(|e| LinkError::Connect {
             url: cfg.url.clone(),
-            message,
+            message: e.0,
         })?;
         let conn = Connection::open(
             &cfg.url,
@@ -950,7 +959,7 @@ mod tests {
             ("14550", "SCHEME"),
         ] {
             let e = check_url(bad).unwrap_err();
-            assert!(e.contains(needle), "{bad}: {e}");
+            assert!(e.0.contains(needle), "{bad}: {e}");
         }
     }
 

@@ -1,8 +1,7 @@
-//! Talking to a PX4 or ArduPilot vehicle over MAVLink: frames, modes, parameter files and
+//! Talking to a PX4 or ArduPilot vehicle over MAVLink: modes, parameter files and
 //! the vehicle link.
 
 pub mod connection;
-pub mod frames;
 pub mod link;
 pub mod modes;
 pub mod params_file;

@@ -298,6 +298,33 @@ pub fn render_parm(params: &[(String, f64)]) -> String {
     s
 }
 
+/// The MAV_PARAM_TYPE of a ParamType.
+pub fn mav_param_type_of(t: ParamType) -> mavlink::dialects::ardupilotmega::MavParamType {
+    match t {
+        ParamType::Uint8 => mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_UINT8,
+        ParamType::Int8 => mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_INT8,
+        ParamType::Uint16 => mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_UINT16,
+        ParamType::Int16 => mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_INT16,
+        ParamType::Uint32 => mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_UINT32,
+        ParamType::Int32 => mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_INT32,
+        ParamType::Real32 => mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_REAL32,
+    }
+}
+
+/// The ParamType of a MAV_PARAM_TYPE, if the link supports it.
+pub fn param_type_of(t: mavlink::dialects::ardupilotmega::MavParamType) -> Option<ParamType> {
+    Some(match t {
+        mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_UINT8 => ParamType::Uint8,
+        mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_INT8 => ParamType::Int8,
+        mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_UINT16 => ParamType::Uint16,
+        mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_INT16 => ParamType::Int16,
+        mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_UINT32 => ParamType::Uint32,
+        mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_INT32 => ParamType::Int32,
+        mavlink::dialects::ardupilotmega::MavParamType::MAV_PARAM_TYPE_REAL32 => ParamType::Real32,
+        _ => return None,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

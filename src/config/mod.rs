@@ -4,6 +4,7 @@
 //! Unknown keys are errors (`deny_unknown_fields`): a misspelt key must not silently
 //! fall back to a default.
 
+mod assemble;
 mod validate;
 
 use std::path::{Path, PathBuf};
@@ -11,7 +12,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::world::geometry::BoundsEnu;
+pub use crate::guidance::LawnConfig;
+pub use crate::world::geometry::BoundsEnu;
+pub use crate::world::road::{EdgeConfig, NodeConfig, RoadConfig};
 
 /// Why a configuration could not be loaded.
 #[derive(Debug, Error)]
@@ -197,42 +200,6 @@ impl Default for VisionSimConfig {
     }
 }
 
-/// A node of the road network.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NodeConfig {
-    /// Identifier that edges refer to.
-    pub id: u32,
-    /// East coordinate, metres.
-    pub x_m: f64,
-    /// North coordinate, metres.
-    pub y_m: f64,
-}
-
-/// A directed edge of the road network with its transition probability.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct EdgeConfig {
-    /// Node the edge leaves.
-    pub from: u32,
-    /// Node the edge enters.
-    pub to: u32,
-    /// Probability of taking this edge when at `from`; the edges leaving a node sum to 1.
-    pub p: f64,
-}
-
-/// The road network as a Markov chain.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RoadConfig {
-    /// Nodes with their positions.
-    pub nodes: Vec<NodeConfig>,
-    /// Directed edges with transition probabilities.
-    pub edges: Vec<EdgeConfig>,
-    /// Node the target starts at.
-    pub start_node: u32,
-}
-
 /// One occlusion region.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -364,22 +331,6 @@ pub struct KalmanConfig {
     pub process_noise_diag: [f64; 4],
     /// Diagonal of the initial covariance P0 (same units).
     pub initial_cov_diag: [f64; 4],
-}
-
-/// The lawnmower (boustrophedon) sweep of the LAWN baseline.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct LawnConfig {
-    /// x of each vertical leg, metres, in sweep order.
-    pub legs_x_m: Vec<f64>,
-    /// Southern end of the legs, metres.
-    pub y_min_m: f64,
-    /// Northern end of the legs, metres.
-    pub y_max_m: f64,
-    /// Distance between consecutive sweep points, metres.
-    pub point_spacing_m: f64,
-    /// A measurement younger than this is tracked instead of sweeping, seconds.
-    pub track_measurement_for_s: f64,
 }
 
 /// Guidance laws.

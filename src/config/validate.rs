@@ -386,10 +386,10 @@ fn validate_vision(c: &Config) -> Result<(), ConfigError> {
     }
     v.detector
         .validate()
-        .map_err(|e| invalid("vision.detector", &v.detector, &e))?;
+        .map_err(|e| invalid("vision.detector", &v.detector, &e.0))?;
     v.projection
         .validate()
-        .map_err(|e| invalid("vision.projection", &v.projection, &e))?;
+        .map_err(|e| invalid("vision.projection", &v.projection, &e.0))?;
     Ok(())
 }
 

@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use thiserror::Error;
 
 use super::pipeline::{Command, FlightRecord};
+use crate::frames::PositionNed;
 use crate::world::geometry::Enu2;
 
 /// The header row. Vehicle pose in MAVLink local NED (m, rad); measurement, estimate and
@@ -163,8 +164,13 @@ pub fn parse(text: &str, path: &str) -> Result<(u64, String, Vec<LoggedStep>), F
         };
         steps.push(LoggedStep {
             t_s: num(0)?,
-            // NED (north, east) -> ENU (east, north).
-            vehicle_enu: Enu2::new(num(2)?, num(1)?),
+            vehicle_enu: PositionNed {
+                x_north_m: num(1)?,
+                y_east_m: num(2)?,
+                z_down_m: 0.0,
+            }
+            .to_enu()
+            .xy(),
             frame: flag(7)?,
             measurement_enu: measured.then_some(z),
             estimate_enu: Enu2::new(num(11)?, num(12)?),

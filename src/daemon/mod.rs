@@ -30,11 +30,11 @@ use tokio::time::Instant;
 
 use thiserror::Error;
 
-use crate::autopilot::frames::PositionEnu;
 use crate::autopilot::link::{LinkConfig, LinkError, VehicleLink};
 use crate::autopilot::modes::{Flavor, Mode};
 use crate::autopilot::signing::SigningKey;
 use crate::config::Config;
+use crate::frames::PositionEnu;
 use crate::metrics::RunSummary;
 use crate::mock::server::{spawn, Faults, MockHandle};
 use crate::mock::MockConfig;
@@ -44,15 +44,46 @@ use pipeline::{Command, PipelineOutput, Ready, Shared, VehicleSnapshot};
 /// Why the daemon stopped with an error.
 #[derive(Debug, Error)]
 pub enum DaemonError {
-    /// A setting or input is wrong.
-    #[error("{0}")]
-    Setup(String),
     /// The vehicle link failed.
     #[error(transparent)]
     Link(#[from] LinkError),
+    /// The pipeline (camera, detector, model) could not start.
+    #[error(transparent)]
+    Pipeline(#[from] pipeline::PipelineError),
     /// SIGINT or SIGTERM before tracking began.
     #[error("stopped by a signal {0}")]
     Interrupted(&'static str),
+    /// The pipeline thread could not be started.
+    #[error("cannot start the pipeline thread: {0}")]
+    PipelineThread(std::io::Error),
+    /// The pipeline thread ended when it should not have.
+    #[error("the pipeline thread died {0}")]
+    PipelineDied(&'static str),
+    /// The in-process mock autopilot could not be started.
+    #[error("cannot start the mock autopilot: {0}")]
+    MockStart(std::io::Error),
+    /// `daemon.signing_key` could not be used.
+    #[error("daemon.signing_key: {0}")]
+    SigningKey(#[from] crate::autopilot::signing::SigningKeyError),
+    /// Link faults were asked for with a real vehicle.
+    #[error(
+        "link faults can be injected only into the in-process mock (mock:px4, mock:ardupilot)"
+    )]
+    LinkFaultNeedsMock,
+    /// The simulated clock was asked for with real hardware.
+    #[error(
+        "the simulated clock needs the in-process mock and the synthetic camera \
+         (daemon.vehicle = \"{vehicle}\", daemon.camera = \"{camera}\"); fly real hardware with `infotrack run`"
+    )]
+    SimulatedClockNeedsSimulation {
+        /// `daemon.vehicle`.
+        vehicle: String,
+        /// `daemon.camera`.
+        camera: String,
+    },
+    /// The simulated-clock runtime could not be built.
+    #[error("cannot build the simulated-clock runtime: {0}")]
+    Runtime(std::io::Error),
 }
 
 /// Command-line choices of one run.
@@ -105,14 +136,17 @@ impl FaultKind {
     }
 }
 
+/// A `--inject` value that is not a fault.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("`{0}`: expected KIND@START+DURATION (seconds), KIND one of camera-freeze, link-cut, loss=PERCENT; e.g. camera-freeze@20+5")]
+pub struct BadFault(pub String);
+
 impl std::str::FromStr for ScheduledFault {
-    type Err = String;
+    type Err = BadFault;
 
     /// `camera-freeze@20+5`, `link-cut@40+5`, `loss=30@10+5` (KIND@START+DURATION, seconds).
-    fn from_str(s: &str) -> Result<Self, String> {
-        let usage = || {
-            format!("`{s}`: expected KIND@START+DURATION (seconds), KIND one of camera-freeze, link-cut, loss=PERCENT; e.g. camera-freeze@20+5")
-        };
+    fn from_str(s: &str) -> Result<Self, BadFault> {
+        let usage = || BadFault(s.to_string());
         let (kind, when) = s.split_once('@').ok_or_else(usage)?;
         let (at, dur) = when.split_once('+').ok_or_else(usage)?;
         let at_s: f64 = at.parse().map_err(|_| usage())?;
@@ -175,7 +209,7 @@ fn free_udp_port() -> Result<u16, DaemonError> {
     std::net::UdpSocket::bind("127.0.0.1:0")
         .and_then(|s| s.local_addr())
         .map(|a| a.port())
-        .map_err(|e| DaemonError::Setup(format!("no free UDP port on loopback: {e}")))
+        .map_err(DaemonError::MockStart)
 }
 
 /// Starts the in-process mock for `mock:px4` / `mock:ardupilot`, with the agent's speed and
@@ -197,14 +231,14 @@ async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String)
     };
     let mock = spawn(&format!("udpin:127.0.0.1:{port}"), mc, Faults::default())
         .await
-        .map_err(|e| DaemonError::Setup(format!("cannot start the mock autopilot: {e}")))?;
+        .map_err(DaemonError::MockStart)?;
     Ok((mock, format!("udpout:127.0.0.1:{port}")))
 }
 
 /// Resolves when SIGINT or SIGTERM arrives. The handlers are installed by this call, not at
 /// the first poll, so that a signal during connection or takeoff is caught too (the default
 /// action would kill the process with the vehicle in the air).
-fn shutdown_signal() -> std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>> {
+fn shutdown_signal() -> ShutdownSignal {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{signal, SignalKind};
@@ -278,34 +312,99 @@ async fn drive_pipeline(
 /// Runs the daemon: starts the pipeline (model, detector), connects to the vehicle, takes
 /// off, tracks for `opts.duration_s` (or until SIGINT/SIGTERM), then holds.
 pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, DaemonError> {
-    let d = cfg.daemon.clone();
     // The pipeline first: a missing model or a bad detector setting is an error before
     // anything flies.
+    let (pipeline, channels) = start_pipeline(cfg, opts).await?;
+    let mut signal = shutdown_signal();
+    let vehicle = connect(cfg, opts, &mut signal).await?;
+    let launched: Result<(), DaemonError> = tokio::select! {
+        r = launch(cfg, &vehicle.link) => r.map_err(DaemonError::from),
+        _ = &mut signal => Err(DaemonError::Interrupted(
+            "during takeoff, before tracking began; the vehicle was put in hold",
+        )),
+    };
+    if let Err(e) = launched {
+        // A takeoff that failed or was stopped half-way may have left the vehicle armed and
+        // climbing.
+        pipeline.shared.stop.store(true, Ordering::Relaxed);
+        drop(channels);
+        if let Err(h) = vehicle.link.hold().await {
+            tracing::error!("could not put the vehicle in hold: {h}");
+        }
+        vehicle.link.flush_tlog();
+        return Err(e);
+    }
+    let tracked = track(cfg, opts, &vehicle, &pipeline, channels, &mut signal).await;
+    stop(vehicle, pipeline, tracked).await
+}
+
+/// The pipeline thread and what it shares with the supervisor.
+struct PipelineHandle {
+    shared: std::sync::Arc<Shared>,
+    thread: std::thread::JoinHandle<PipelineOutput>,
+    physics_dt: Duration,
+}
+
+/// The channels that step the pipeline: one tick out, its end back.
+type TickChannels = (mpsc::Sender<()>, mpsc::Receiver<()>);
+
+/// Resolves on SIGINT or SIGTERM.
+type ShutdownSignal = std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>;
+
+/// Phase 1: builds the pipeline (model, detector, camera) on its own thread and waits until
+/// it is ready.
+async fn start_pipeline(
+    cfg: &Config,
+    opts: &RunOptions,
+) -> Result<(PipelineHandle, TickChannels), DaemonError> {
     let shared = Shared::new();
     let (ready_tx, ready_rx) = mpsc::channel();
     let (tick_tx, tick_rx) = mpsc::channel();
     let (done_tx, done_rx) = mpsc::channel();
-    let pipeline = {
+    let thread = {
         let (cfg, shared, motion, seed) =
             (cfg.clone(), shared.clone(), opts.motion.clone(), opts.seed);
         std::thread::Builder::new()
             .name("pipeline".into())
             .spawn(move || pipeline::run(cfg, motion, seed, shared, ready_tx, tick_rx, done_tx))
-            .map_err(|e| DaemonError::Setup(format!("cannot start the pipeline thread: {e}")))?
+            .map_err(DaemonError::PipelineThread)?
     };
     let ready = tokio::task::spawn_blocking(move || ready_rx.recv())
         .await
-        .map_err(|e| DaemonError::Setup(e.to_string()))?;
+        .map_err(|_| DaemonError::PipelineDied("at start"))?;
     match ready {
         Ok(Ready::Ok) => {}
-        Ok(Ready::Err(e)) => return Err(DaemonError::Setup(e)),
-        Err(_) => {
-            return Err(DaemonError::Setup(
-                "the pipeline thread died at start".into(),
-            ))
-        }
+        Ok(Ready::Err(e)) => return Err(DaemonError::Pipeline(e)),
+        Err(_) => return Err(DaemonError::PipelineDied("at start")),
     }
+    Ok((
+        PipelineHandle {
+            shared,
+            thread,
+            physics_dt: Duration::from_secs_f64(1.0 / cfg.timing.physics_hz),
+        },
+        (tick_tx, done_rx),
+    ))
+}
 
+/// The vehicle, once heard.
+struct Vehicle {
+    link: VehicleLink,
+    flavor: Flavor,
+    /// `daemon.vehicle` as configured.
+    name: String,
+    url: String,
+    mock: Option<MockHandle>,
+}
+
+/// Phase 2: starts the in-process mock if asked, opens the link and waits for the
+/// vehicle's heartbeat.
+async fn connect(
+    cfg: &Config,
+    opts: &RunOptions,
+    signal: &mut ShutdownSignal,
+) -> Result<Vehicle, DaemonError> {
+    let d = &cfg.daemon;
     let (mock, url) = match d.vehicle.as_str() {
         "mock:px4" => {
             let (m, u) = start_mock(cfg, Flavor::Px4).await?;
@@ -323,10 +422,7 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
             .iter()
             .any(|f| !matches!(f.kind, FaultKind::CameraFreeze))
     {
-        return Err(DaemonError::Setup(
-            "link faults can be injected only into the in-process mock (mock:px4, mock:ardupilot)"
-                .into(),
-        ));
+        return Err(DaemonError::LinkFaultNeedsMock);
     }
     let mut lc = LinkConfig::new(&url);
     lc.system_id = d.system_id;
@@ -334,113 +430,156 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
     lc.setpoint_hz = d.setpoint_hz;
     lc.geofence_enu = Some(cfg.workspace_enu);
     lc.tlog = opts.tlog.clone();
-    lc.signing_key = d
-        .signing_key
-        .as_deref()
-        .map(SigningKey::load)
-        .transpose()
-        .map_err(|e| DaemonError::Setup(e.to_string()))?;
-    let mut signal = shutdown_signal();
+    lc.signing_key = d.signing_key.as_deref().map(SigningKey::load).transpose()?;
     let link = VehicleLink::connect(lc).await?;
     let flavor = tokio::select! {
         f = link.wait_vehicle(Duration::from_secs_f64(d.connect_timeout_s)) => f?,
-        _ = &mut signal => {
+        _ = &mut *signal => {
             return Err(DaemonError::Interrupted("while waiting for the vehicle; nothing was commanded"))
         }
     };
     tracing::info!("vehicle: {flavor} on {url}");
-    let launch = async {
-        link.request_telemetry().await?;
-        link.take_off(
-            cfg.agent.altitude_m,
-            Duration::from_secs_f64(d.takeoff_timeout_s),
-        )
-        .await?;
-        // Start where the simulator's agent starts (agent.start_enu_m), at the tracking
-        // altitude, before tracking begins: the scenario's initial condition.
-        let start = PositionEnu {
-            x_east_m: cfg.agent.start_enu_m[0],
-            y_north_m: cfg.agent.start_enu_m[1],
-            z_up_m: cfg.agent.altitude_m,
-        };
-        link.set_setpoint(start, 0.0)?;
-        let want = start.to_ned();
-        // Not VehicleLink::wait_for: that polls every 20 ms, and the instant tracking begins
-        // decides the simulated flights (and the recorded numbers of each seed).
-        let until = Instant::now() + Duration::from_secs_f64(d.takeoff_timeout_s);
-        loop {
-            if let Some((_, p, v)) = link.state().local_ned {
-                let off = (p.x_north_m - want.x_north_m)
-                    .hypot(p.y_east_m - want.y_east_m)
-                    .hypot(p.z_down_m - want.z_down_m);
-                let speed = v.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
-                if off < 0.05 && speed < 0.05 {
-                    return Ok(());
-                }
-            }
-            if Instant::now() > until {
-                return Err(LinkError::Timeout {
-                    what: format!(
-                        "the vehicle to reach the start point agent.start_enu_m = {:?} \
-                         (daemon.takeoff_timeout_s)",
-                        cfg.agent.start_enu_m
-                    ),
-                    seconds: d.takeoff_timeout_s,
-                });
-            }
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
-    };
-    let launched: Result<(), DaemonError> = tokio::select! {
-        r = launch => r.map_err(DaemonError::from),
-        _ = &mut signal => Err(DaemonError::Interrupted(
-            "during takeoff, before tracking began; the vehicle was put in hold",
-        )),
-    };
-    if let Err(e) = launched {
-        // A takeoff that failed or was stopped half-way may have left the vehicle armed and
-        // climbing.
-        shared.stop.store(true, Ordering::Relaxed);
-        drop(tick_tx);
-        if let Err(h) = link.hold().await {
-            tracing::error!("could not put the vehicle in hold: {h}");
-        }
-        link.flush_tlog();
-        return Err(e);
-    }
+    Ok(Vehicle {
+        link,
+        flavor,
+        name: d.vehicle.clone(),
+        url,
+        mock,
+    })
+}
 
-    *shared.vehicle.lock().expect("shared poisoned") = snapshot(&link);
+/// Phase 3: telemetry, takeoff to the tracking altitude, then the scenario's start point
+/// (`agent.start_enu_m`, where the simulator's agent starts) before tracking begins.
+async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
+    let d = &cfg.daemon;
+    link.request_telemetry().await?;
+    link.take_off(
+        cfg.agent.altitude_m,
+        Duration::from_secs_f64(d.takeoff_timeout_s),
+    )
+    .await?;
+    let start = PositionEnu {
+        x_east_m: cfg.agent.start_enu_m[0],
+        y_north_m: cfg.agent.start_enu_m[1],
+        z_up_m: cfg.agent.altitude_m,
+    };
+    link.set_setpoint(start, 0.0)?;
+    let want = start.to_ned();
+    // Not VehicleLink::wait_for: that polls every 20 ms, and the instant tracking begins
+    // decides the simulated flights (and the recorded numbers of each seed).
+    let until = Instant::now() + Duration::from_secs_f64(d.takeoff_timeout_s);
+    loop {
+        if let Some((_, p, v)) = link.state().local_ned {
+            let off = (p.x_north_m - want.x_north_m)
+                .hypot(p.y_east_m - want.y_east_m)
+                .hypot(p.z_down_m - want.z_down_m);
+            let speed = v.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
+            if off < 0.05 && speed < 0.05 {
+                return Ok(());
+            }
+        }
+        if Instant::now() > until {
+            return Err(LinkError::Timeout {
+                what: format!(
+                    "the vehicle to reach the start point agent.start_enu_m = {:?} \
+                     (daemon.takeoff_timeout_s)",
+                    cfg.agent.start_enu_m
+                ),
+                seconds: d.takeoff_timeout_s,
+            });
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// What the tracking phase counted.
+struct Tracked {
+    stopped_by: StopReason,
+    link_losses: u32,
+    geofence_refusals: u64,
+    ticker: tokio::task::JoinHandle<()>,
+}
+
+/// The supervisor's state during tracking.
+struct Supervisor<'a> {
+    cfg: &'a Config,
+    opts: &'a RunOptions,
+    vehicle: &'a Vehicle,
+    shared: &'a std::sync::Arc<Shared>,
+    applied: Option<Command>,
+    geofence_refusals: u64,
+    link_losses: u32,
+    was_lost: bool,
+    fault_active: Vec<bool>,
+    last_status: Instant,
+}
+
+/// Phase 4: steps the pipeline on the runtime's clock and, every 20 ms, feeds it the
+/// vehicle's state, applies its command, switches faults and prints the status line, until
+/// the duration, a signal or a dead pipeline.
+async fn track(
+    cfg: &Config,
+    opts: &RunOptions,
+    vehicle: &Vehicle,
+    pipeline: &PipelineHandle,
+    (ticks, done): TickChannels,
+    signal: &mut ShutdownSignal,
+) -> Tracked {
+    let shared = &pipeline.shared;
+    shared.to_pipeline.lock().expect("shared poisoned").vehicle = snapshot(&vehicle.link);
     let ticker = tokio::spawn(drive_pipeline(
-        tick_tx,
-        done_rx,
-        Duration::from_secs_f64(1.0 / cfg.timing.physics_hz),
+        ticks,
+        done,
+        pipeline.physics_dt,
         shared.clone(),
     ));
     let began = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(20));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    let mut last_status = Instant::now();
-    let mut applied: Option<Command> = None;
-    let mut geofence_refusals = 0u64;
-    let mut link_losses = 0u32;
-    let mut was_lost = false;
-    let mut fault_active = vec![false; opts.faults.len()];
+    let mut sup = Supervisor {
+        cfg,
+        opts,
+        vehicle,
+        shared,
+        applied: None,
+        geofence_refusals: 0,
+        link_losses: 0,
+        was_lost: false,
+        fault_active: vec![false; opts.faults.len()],
+        last_status: Instant::now(),
+    };
     let stopped_by = loop {
         tokio::select! {
-            _ = &mut signal => break StopReason::Signal,
+            _ = &mut *signal => break StopReason::Signal,
             _ = tick.tick() => {}
         }
         if began.elapsed().as_secs_f64() >= opts.duration_s {
             break StopReason::Duration;
         }
-        if pipeline.is_finished() || ticker.is_finished() {
+        if pipeline.thread.is_finished() || ticker.is_finished() {
             // The pipeline died (a panic): nothing decides any more; hold.
             tracing::error!("the pipeline thread stopped; holding the vehicle");
             break StopReason::Fault;
         }
-        let now_s = began.elapsed().as_secs_f64();
+        sup.switch_faults(began.elapsed().as_secs_f64());
+        let snap = sup.feed_vehicle_state();
+        sup.apply_command(snap);
+        sup.print_status();
+    };
+    Tracked {
+        stopped_by,
+        link_losses: sup.link_losses,
+        geofence_refusals: sup.geofence_refusals,
+        ticker,
+    }
+}
+
+impl Supervisor<'_> {
+    /// Starts and ends the scheduled faults.
+    fn switch_faults(&mut self, now_s: f64) {
+        let mock = self.vehicle.mock.as_ref();
         let mut toggled = false;
-        for (f, active) in opts.faults.iter().zip(fault_active.iter_mut()) {
+        for (f, active) in self.opts.faults.iter().zip(self.fault_active.iter_mut()) {
             let on = now_s >= f.at_s && now_s < f.at_s + f.duration_s;
             if on == *active {
                 continue;
@@ -452,129 +591,164 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
                 f.kind.name(),
                 if on { "begins" } else { "ends" }
             );
-            match (f.kind, mock.as_ref()) {
-                (FaultKind::CameraFreeze, _) => shared.camera_frozen.store(on, Ordering::Relaxed),
+            match (f.kind, mock) {
+                (FaultKind::CameraFreeze, _) => {
+                    self.shared
+                        .to_pipeline
+                        .lock()
+                        .expect("shared poisoned")
+                        .camera_frozen = on
+                }
                 (FaultKind::LinkCut, Some(m)) if on => {
                     m.cut_link(Duration::from_secs_f64(f.duration_s))
                 }
                 (FaultKind::PacketLoss(p), Some(m)) => m.set_faults(Faults {
                     loss_percent: if on { p } else { 0.0 },
-                    seed: opts.seed,
+                    seed: self.opts.seed,
                     ..Faults::default()
                 }),
                 _ => {}
             }
         }
         if toggled {
-            let active: Vec<String> = opts
+            let active: Vec<String> = self
+                .opts
                 .faults
                 .iter()
-                .zip(&fault_active)
+                .zip(&self.fault_active)
                 .filter(|(_, on)| **on)
                 .map(|(f, _)| f.kind.name())
                 .collect();
-            *shared.faults.lock().expect("shared poisoned") = active.join("+");
+            self.shared
+                .to_pipeline
+                .lock()
+                .expect("shared poisoned")
+                .faults = active.join("+");
         }
-        let snap = snapshot(&link);
-        *shared.vehicle.lock().expect("shared poisoned") = snap;
+    }
+
+    /// Gives the pipeline the vehicle's latest state (and the pose history for a real
+    /// camera); pauses setpoints while the link is lost.
+    fn feed_vehicle_state(&mut self) -> Option<VehicleSnapshot> {
+        let link = &self.vehicle.link;
+        let snap = snapshot(link);
+        self.shared
+            .to_pipeline
+            .lock()
+            .expect("shared poisoned")
+            .vehicle = snap;
         if let (Some(sn), Some((at, _, _))) = (snap, link.state().local_ned) {
             // Stamped with the telemetry's arrival, for frames from a real camera.
-            shared
+            self.shared
                 .poses
                 .lock()
                 .expect("shared poisoned")
                 .push(at, sn.pose);
         }
         let lost = link.state().lost;
-        if lost != was_lost {
+        if lost != self.was_lost {
             // Commands on stale state are worse than none: the vehicle's own failsafe acts.
             link.pause_setpoints(lost);
             if lost {
-                link_losses += 1;
+                self.link_losses += 1;
             }
-            was_lost = lost;
+            self.was_lost = lost;
         }
-        let cmd = *shared.command.lock().expect("shared poisoned");
-        if cmd != applied && !lost {
-            if let Some(c) = cmd {
-                let target = match c {
-                    Command::GoTo(w) => Some(w),
-                    Command::HoldHere => snap.map(|s| {
-                        crate::world::geometry::Enu2::new(
-                            s.pose.position_ned_m[1],
-                            s.pose.position_ned_m[0],
-                        )
-                    }),
-                };
-                if let Some(w) = target {
-                    let p = PositionEnu {
-                        x_east_m: w.x,
-                        y_north_m: w.y,
-                        z_up_m: cfg.agent.altitude_m,
-                    };
-                    if let Err(e) = link.set_setpoint(p, 0.0) {
-                        geofence_refusals += 1;
-                        tracing::warn!("{e}");
-                    }
+        snap
+    }
+
+    /// Sends the pipeline's newest command as a setpoint (inside the geofence).
+    fn apply_command(&mut self, snap: Option<VehicleSnapshot>) {
+        let cmd = self.shared.pipeline_view().command;
+        if cmd == self.applied || self.was_lost {
+            return;
+        }
+        if let Some(c) = cmd {
+            let target = match c {
+                Command::GoTo(w) => Some(w),
+                Command::HoldHere => snap.map(|s| s.pose.position_enu()),
+            };
+            if let Some(w) = target {
+                let p = PositionEnu::from_xy(&w, self.cfg.agent.altitude_m);
+                if let Err(e) = self.vehicle.link.set_setpoint(p, 0.0) {
+                    self.geofence_refusals += 1;
+                    tracing::warn!("{e}");
                 }
             }
-            applied = cmd;
         }
-        if opts.status_line && last_status.elapsed() >= Duration::from_secs(1) {
-            last_status = Instant::now();
-            let st = *shared.status.lock().expect("shared poisoned");
-            let mode = link
-                .state()
-                .mode
-                .map(|m| format!("{m:?}"))
-                .unwrap_or_else(|| "?".into());
-            if let Some(s) = st {
-                eprintln!(
-                    "t={:5.1}s mode={mode} target={} N_eff={:6.1} H={:6.2} state={}",
-                    s.t_s,
-                    if s.seen { "seen" } else { "unseen" },
-                    s.n_eff,
-                    s.entropy,
-                    s.state.as_str()
-                );
-            }
-        }
-    };
+        self.applied = cmd;
+    }
 
-    shared.stop.store(true, Ordering::Relaxed);
+    /// The status line, once a second, when asked for.
+    fn print_status(&mut self) {
+        if !self.opts.status_line || self.last_status.elapsed() < Duration::from_secs(1) {
+            return;
+        }
+        self.last_status = Instant::now();
+        let st = self.shared.pipeline_view().status;
+        let mode = self
+            .vehicle
+            .link
+            .state()
+            .mode
+            .map(|m| format!("{m:?}"))
+            .unwrap_or_else(|| "?".into());
+        if let Some(s) = st {
+            eprintln!(
+                "t={:5.1}s mode={mode} target={} N_eff={:6.1} H={:6.2} state={}",
+                s.t_s,
+                if s.seen { "seen" } else { "unseen" },
+                s.n_eff,
+                s.entropy,
+                s.state.as_str()
+            );
+        }
+    }
+}
+
+/// Phase 5: stops the pipeline, holds the vehicle whatever happened, and reports.
+async fn stop(
+    vehicle: Vehicle,
+    pipeline: PipelineHandle,
+    tracked: Tracked,
+) -> Result<DaemonReport, DaemonError> {
+    pipeline.shared.stop.store(true, Ordering::Relaxed);
     // The driver sees the stop at its next tick and closes the tick channel: the pipeline
     // thread then returns its output.
-    let _ = ticker.await;
-    let joined = tokio::task::spawn_blocking(move || pipeline.join()).await;
+    let _ = tracked.ticker.await;
+    let thread = pipeline.thread;
+    let joined = tokio::task::spawn_blocking(move || thread.join()).await;
     // Clean stop, whatever happened to the pipeline: hold before exiting.
-    let hold = link.hold().await;
-    if let Err(e) = &hold {
+    let link = &vehicle.link;
+    if let Err(e) = link.hold().await {
         tracing::error!("could not put the vehicle in hold: {e}");
     }
-    let output = joined
-        .map_err(|e| DaemonError::Setup(e.to_string()))?
-        .map_err(|_| {
+    let output = match joined {
+        Ok(Ok(output)) => output,
+        _ => {
             link.flush_tlog();
-            DaemonError::Setup("the pipeline thread panicked (the vehicle was put in hold)".into())
-        })?;
+            return Err(DaemonError::PipelineDied(
+                "with a panic (the vehicle was put in hold)",
+            ));
+        }
+    };
     let state = link.state();
     link.flush_tlog();
     let steps: Vec<_> = output.records.iter().map(|r| r.step.clone()).collect();
     let summary = RunSummary::from_steps(&steps, &output.filter_ms, &output.guidance_ms);
     Ok(DaemonReport {
         summary,
-        stopped_by,
+        stopped_by: tracked.stopped_by,
         final_mode: state.mode,
         unexpected_mode_changes: state.unexpected_mode_changes.clone(),
-        link_losses,
-        geofence_refusals,
-        flavor,
-        vehicle: if mock.is_some() {
-            format!("{} via {url}", d.vehicle)
-        } else {
-            url.clone()
+        link_losses: tracked.link_losses,
+        geofence_refusals: tracked.geofence_refusals,
+        flavor: vehicle.flavor,
+        vehicle: match &vehicle.mock {
+            Some(_) => format!("{} via {}", vehicle.name, vehicle.url),
+            None => vehicle.url.clone(),
         },
-        mock,
+        mock: vehicle.mock,
         output,
     })
 }
@@ -586,18 +760,15 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
 /// simulated world: a real camera or a real vehicle lives on the wall clock.
 pub fn run_simulated(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, DaemonError> {
     if !cfg.daemon.vehicle.starts_with("mock:") || cfg.daemon.camera != "synthetic" {
-        return Err(DaemonError::Setup(format!(
-            "the simulated clock needs the in-process mock and the synthetic camera \
-             (daemon.vehicle = \"{}\", daemon.camera = \"{}\"); fly real hardware with `infotrack run`",
-            cfg.daemon.vehicle, cfg.daemon.camera
-        )));
+        return Err(DaemonError::SimulatedClockNeedsSimulation {
+            vehicle: cfg.daemon.vehicle.clone(),
+            camera: cfg.daemon.camera.clone(),
+        });
     }
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .start_paused(true)
         .build()
-        .map_err(|e| {
-            DaemonError::Setup(format!("cannot build the simulated-clock runtime: {e}"))
-        })?;
+        .map_err(DaemonError::Runtime)?;
     rt.block_on(run(cfg, opts))
 }

@@ -5,18 +5,20 @@
 //! DMMN, the filter and EER never block the async reactor; it talks to the async side only
 //! through [`Shared`] and the tick channels.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use crate::config::Config;
-use crate::estimation::{FilterParams, ParticleFilter};
-use crate::guidance::{EerParams, EerPlanner, LawnmowerPath};
+use crate::guidance::GuidanceKind;
 use crate::metrics::StepRecord;
-use crate::motion;
 use crate::rng::{stream_rng, Stream};
-use crate::sim::target::TargetSim;
-use crate::sim::vision_sensor::{VisionSensor, VisionStats};
+use crate::simulated::{RenderedSensor, TargetSim, VisionSensor, VisionStats};
+pub use crate::tracker::{Command, TrackState};
+use crate::tracker::{
+    Decision, EstimatorKind, MonotonicClock, Observation, Prior, Sensor, StepOutcome, TickInput,
+    Tracker,
+};
 use crate::vision::camera_model::{CameraModel, CameraMount, VehiclePoseNed};
 use crate::vision::capture::{Camera, CaptureConfig};
 use crate::vision::detector::{AprilTagDetector, RoiPx, RoiSearch};
@@ -35,40 +37,6 @@ pub struct VehicleSnapshot {
     pub mode: Option<crate::autopilot::modes::Mode>,
 }
 
-/// What the pipeline asks the vehicle to do.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Command {
-    /// Fly to this point, world ENU, at the agent's altitude.
-    GoTo(Enu2),
-    /// Stay where it is (target-lost fallback `hold`).
-    HoldHere,
-}
-
-/// Tracking state, for the status line and the log.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum TrackState {
-    /// Seen within the target-lost time.
-    Tracking,
-    /// Not seen for longer: the fallback is flying.
-    Lost,
-    /// No fresh vehicle state: no new commands.
-    LinkLost,
-    /// No camera frames for the camera timeout: hold and report.
-    CameraLost,
-}
-
-impl TrackState {
-    /// Lower-case name.
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            Self::Tracking => "tracking",
-            Self::Lost => "lost",
-            Self::LinkLost => "link-lost",
-            Self::CameraLost => "camera-lost",
-        }
-    }
-}
-
 /// What the status line shows.
 #[derive(Debug, Clone, Copy)]
 pub struct Status {
@@ -84,39 +52,61 @@ pub struct Status {
     pub state: TrackState,
 }
 
-/// State shared between the pipeline thread and the async side.
+/// What the supervisor tells the pipeline, rewritten every 20 ms.
+#[derive(Debug, Clone, Default)]
+pub struct SupervisorView {
+    /// The vehicle's latest state.
+    pub vehicle: Option<VehicleSnapshot>,
+    /// Injected faults in force, `+`-joined (logged per step).
+    pub faults: String,
+    /// The camera delivers nothing while set (fault injection: a frozen camera).
+    pub camera_frozen: bool,
+}
+
+/// What the pipeline tells the supervisor, rewritten at each filter step and decision.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PipelineView {
+    /// The command in force.
+    pub command: Option<Command>,
+    /// What the status line shows.
+    pub status: Option<Status>,
+}
+
+/// The meeting point of the pipeline thread and the async side: one small state struct in
+/// each direction (the latest value wins), the pose history for frames from a real camera,
+/// and the stop flag.
 pub struct Shared {
-    /// Latest vehicle state (written by the async side).
-    pub vehicle: Mutex<Option<VehicleSnapshot>>,
-    /// Latest command (written by the pipeline).
-    pub command: Mutex<Option<Command>>,
-    /// Status line.
-    pub status: Mutex<Option<Status>>,
+    /// Supervisor -> pipeline.
+    pub to_pipeline: Mutex<SupervisorView>,
+    /// Pipeline -> supervisor.
+    pub from_pipeline: Mutex<PipelineView>,
+    /// Recent vehicle poses by arrival time (written by the async side).
+    pub poses: Mutex<super::pose_history::PoseHistory>,
     /// Ask the pipeline to finish.
     pub stop: AtomicBool,
-    /// Injected faults in force, `+`-joined (written by the supervisor, logged per step).
-    pub faults: Mutex<String>,
-    /// The camera delivers nothing while set (fault injection: a frozen camera).
-    pub camera_frozen: AtomicBool,
-    /// Recent vehicle poses by arrival time (written by the async side), for frames from a
-    /// real camera.
-    pub poses: Mutex<super::pose_history::PoseHistory>,
 }
 
 impl Shared {
     /// Empty shared state.
     pub fn new() -> Arc<Self> {
         Arc::new(Self {
-            vehicle: Mutex::new(None),
-            command: Mutex::new(None),
-            status: Mutex::new(None),
-            stop: AtomicBool::new(false),
-            faults: Mutex::new(String::new()),
-            camera_frozen: AtomicBool::new(false),
+            to_pipeline: Mutex::new(SupervisorView::default()),
+            from_pipeline: Mutex::new(PipelineView::default()),
             poses: Mutex::new(super::pose_history::PoseHistory::new(Duration::from_secs(
                 2,
             ))),
+            stop: AtomicBool::new(false),
         })
+    }
+
+    /// What the supervisor said last.
+    pub fn supervisor_view(&self) -> SupervisorView {
+        self.to_pipeline.lock().expect("shared poisoned").clone()
+    }
+
+    /// What the pipeline said last.
+    pub fn pipeline_view(&self) -> PipelineView {
+        *self.from_pipeline.lock().expect("shared poisoned")
     }
 }
 
@@ -172,7 +162,7 @@ pub enum Ready {
     /// Built: model loaded, detector up.
     Ok,
     /// Could not start.
-    Err(String),
+    Err(PipelineError),
 }
 
 /// A real camera: frames from capture, projected with the pose at their capture time.
@@ -186,14 +176,13 @@ struct FieldCamera {
 }
 
 impl FieldCamera {
-    fn open(cfg: &Config) -> Result<Self, String> {
+    fn open(cfg: &Config) -> Result<Self, PipelineError> {
         let d = &cfg.daemon;
         let calib = d
             .calibration
             .as_deref()
-            .ok_or("daemon.calibration is needed with a real camera")?;
-        let intrinsics =
-            crate::vision::cv_io::load_calibration(calib).map_err(|e| e.to_string())?;
+            .ok_or(PipelineError::NoCalibration)?;
+        let intrinsics = crate::vision::cv_io::load_calibration(calib)?;
         let [r, p, y] = d.camera_mount_rpy_rad;
         let camera = Camera::open(CaptureConfig {
             source: d.camera.clone(),
@@ -201,18 +190,15 @@ impl FieldCamera {
             height_px: intrinsics.height_px,
             fps: d.camera_fps,
             timeout_s: d.camera_timeout_s,
-        })
-        .map_err(|e| e.to_string())?;
+        })?;
         Ok(Self {
             camera,
             model: CameraModel {
                 intrinsics,
                 mount: CameraMount::from_angles(r, p, y, d.camera_offset_body_frd_m),
             },
-            search: RoiSearch::new(
-                AprilTagDetector::new(cfg.vision.detector.clone()).map_err(|e| e.to_string())?,
-            )
-            .with_max_full_frame_decimation(cfg.vision.detector.max_full_frame_decimation),
+            search: RoiSearch::new(AprilTagDetector::new(cfg.vision.detector.clone())?)
+                .with_max_full_frame_decimation(cfg.vision.detector.max_full_frame_decimation),
             noise: cfg.vision.projection.clone(),
             tag_ids: vec![cfg.vision.tag_id],
             tag_size_m: cfg.vision.tag_size_m,
@@ -223,7 +209,7 @@ impl FieldCamera {
     fn look(
         &mut self,
         shared: &Shared,
-        prior: (Enu2, nalgebra::Matrix2<f64>),
+        prior: &Prior,
         stats: &mut VisionStats,
     ) -> Option<(VehiclePoseNed, Option<Enu2>)> {
         let frame = self.camera.latest()?;
@@ -257,10 +243,10 @@ impl FieldCamera {
         let side_px = self.tag_size_m * i.fx_px / alt;
         let roi = self
             .model
-            .world_enu_to_pixel([prior.0.x, prior.0.y], 0.0, &pose)
+            .world_enu_to_pixel([prior.mean_enu.x, prior.mean_enu.y], 0.0, &pose)
             .filter(|px| self.model.in_image(*px))
             .map(|px| {
-                let sigma_m = prior.1.symmetric_eigenvalues().max().max(0.0).sqrt();
+                let sigma_m = prior.cov_m2.symmetric_eigenvalues().max().max(0.0).sqrt();
                 RoiPx::around(px, side_px, sigma_m * i.fx_px / alt)
             });
         let z = match self
@@ -284,34 +270,118 @@ impl FieldCamera {
     }
 }
 
-/// The pipeline's state between ticks.
+/// The daemon's camera as the tracker sees it: the synthetic camera over the simulated
+/// world, or a real one; either may be frozen by fault injection.
+struct DaemonSensor {
+    shared: Arc<Shared>,
+    /// The synthetic camera (its frame seeds are drawn at every filter step, with or
+    /// without a real camera, so that a flight's random streams do not depend on it).
+    synthetic: RenderedSensor,
+    field: Option<FieldCamera>,
+    /// The vehicle's pose from telemetry at this tick.
+    telemetry_pose: Option<VehiclePoseNed>,
+    /// The camera is frozen (fault injection) at this tick.
+    camera_frozen: bool,
+    /// The pose of the last observation (the frame's, with a real camera).
+    observed_pose: Option<VehiclePoseNed>,
+    /// Detection and projection time of the last frame, ms (rendering excluded).
+    detect_ms: f64,
+    frames_missed: u64,
+}
+
+impl Sensor for DaemonSensor {
+    type Error = std::convert::Infallible;
+
+    fn observe(
+        &mut self,
+        _t_s: f64,
+        vehicle_enu: &Enu2,
+        prior: &Prior,
+    ) -> Result<Observation, Self::Error> {
+        let started = Instant::now();
+        let frame_seed = self.synthetic.next_frame_seed();
+        self.observed_pose = self.telemetry_pose;
+        let mut frozen = self.camera_frozen;
+        let field_look = match self.field.as_mut() {
+            Some(f) if !frozen => {
+                let look = f.look(&self.shared, prior, &mut self.synthetic.camera.stats);
+                if look.is_none() {
+                    frozen = true;
+                }
+                look
+            }
+            _ => None,
+        };
+        let observation = if frozen {
+            self.frames_missed += 1;
+            Observation::NoFrame
+        } else if let Some((pose, z)) = field_look {
+            self.observed_pose = Some(pose);
+            Observation::Frame {
+                taken_from_enu: pose.position_enu(),
+                z,
+            }
+        } else {
+            let z = match self
+                .synthetic
+                .measure_with_seed(vehicle_enu, prior, frame_seed)
+            {
+                Ok(z) => z,
+                Err(e) => {
+                    tracing::warn!("camera frame dropped: {e}");
+                    None
+                }
+            };
+            Observation::Frame {
+                taken_from_enu: *vehicle_enu,
+                z,
+            }
+        };
+        // From the frame's capture (the end of its rendering) to its measurement.
+        let render_ms = if self.field.is_some() {
+            0.0
+        } else {
+            self.synthetic.camera.last_render_ms
+        };
+        self.detect_ms = started.elapsed().as_secs_f64() * 1e3 - render_ms;
+        Ok(observation)
+    }
+}
+
+/// The pipeline's state between ticks: the simulated target (on the synthetic camera), the
+/// camera, and the tracker.
 struct Pipeline {
-    cfg: Config,
     shared: Arc<Shared>,
     world: World,
+    physics_dt_s: f64,
+    guidance_budget_ms: f64,
+    camera_timeout_s: f64,
     rng_target: crate::rng::CoreRng,
-    rng_meas: crate::rng::CoreRng,
-    rng_filter: crate::rng::CoreRng,
-    rng_guid: crate::rng::CoreRng,
-    model: Box<dyn motion::MotionModel>,
-    sensor: VisionSensor,
-    field: Option<FieldCamera>,
-    pf: ParticleFilter,
-    planner: EerPlanner,
-    lawn: LawnmowerPath,
     target: TargetSim,
+    sensor: DaemonSensor,
+    tracker: Tracker,
+    clock: MonotonicClock,
     out: PipelineOutput,
-    next_filter: u64,
-    next_guid: u64,
-    last_seen_s: f64,
-    last_frame_s: f64,
     last_pose: Option<VehiclePoseNed>,
+    /// Detection plus filter time of the latest frame, ms.
     last_frame_ms: f64,
-    entropy: f64,
-    last_eer: f64,
-    command: Option<Command>,
-    state: TrackState,
-    tick: u64,
+}
+
+/// Why the pipeline could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The motion model name.
+    #[error("daemon.motion: {0}")]
+    Motion(#[from] crate::tracker::UnknownEstimator),
+    /// The tracker (its motion model).
+    #[error(transparent)]
+    Tracker(#[from] crate::tracker::TrackerError),
+    /// The synthetic camera or the detector.
+    #[error(transparent)]
+    Vision(#[from] crate::vision::VisionError),
+    /// The real camera: no calibration file.
+    #[error("daemon.calibration is needed with a real camera")]
+    NoCalibration,
 }
 
 impl Pipeline {
@@ -320,270 +390,176 @@ impl Pipeline {
         motion_name: &str,
         seed: u64,
         shared: Arc<Shared>,
-    ) -> Result<Self, String> {
-        let world = World::from_config(&cfg);
+    ) -> Result<Self, PipelineError> {
+        let world = cfg.world();
         let mut rng_target = stream_rng(seed, 0, Stream::Target, 0);
         let rng_meas = stream_rng(seed, 0, Stream::Measurement, 0);
-        let mut rng_filter = stream_rng(seed, 0, Stream::Filter, 0);
-        let rng_guid = stream_rng(seed, 0, Stream::Guidance, 0);
-        let model = motion::build(motion_name, &cfg).map_err(|e| e.to_string())?;
-        let sensor = VisionSensor::from_config(&cfg).map_err(|e| e.to_string())?;
+        let tracker = Tracker::new(
+            cfg.tracker_params(GuidanceKind::Eer, true),
+            world.clone(),
+            &EstimatorKind::parse(motion_name)?,
+            stream_rng(seed, 0, Stream::Filter, 0),
+            stream_rng(seed, 0, Stream::Guidance, 0),
+        )?;
+        let synthetic = RenderedSensor::new(VisionSensor::from_config(&cfg)?, rng_meas);
         // A real camera replaces the simulated world's synthetic one.
         let field = if cfg.daemon.camera == "synthetic" {
             None
         } else {
             Some(FieldCamera::open(&cfg)?)
         };
-        let pf = ParticleFilter::new(
-            FilterParams::from_config(&cfg),
-            world.workspace_enu,
-            &mut rng_filter,
-        );
-        let planner = EerPlanner::new(EerParams::from_config(&cfg));
-        let lawn = LawnmowerPath::new(&cfg.guidance.lawn);
         let target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
         Ok(Self {
-            cfg,
+            sensor: DaemonSensor {
+                shared: shared.clone(),
+                synthetic,
+                field,
+                telemetry_pose: None,
+                camera_frozen: false,
+                observed_pose: None,
+                detect_ms: 0.0,
+                frames_missed: 0,
+            },
             shared,
             world,
+            physics_dt_s: 1.0 / cfg.timing.physics_hz,
+            guidance_budget_ms: cfg.daemon.guidance_budget_ms,
+            camera_timeout_s: cfg.daemon.camera_timeout_s,
             rng_target,
-            rng_meas,
-            rng_filter,
-            rng_guid,
-            model,
-            sensor,
-            field,
-            pf,
-            planner,
-            lawn,
             target,
+            tracker,
+            clock: MonotonicClock::new(),
             out: PipelineOutput::default(),
-            next_filter: 1,
-            next_guid: 1,
-            last_seen_s: 0.0,
-            last_frame_s: 0.0,
             last_pose: None,
             last_frame_ms: 0.0,
-            entropy: f64::NAN,
-            last_eer: f64::NAN,
-            command: None,
-            state: TrackState::Tracking,
-            tick: 0,
         })
     }
 
     fn finish(mut self) -> PipelineOutput {
-        self.out.vision = self.sensor.stats;
+        self.out.vision = self.sensor.synthetic.camera.stats;
+        self.out.frames_missed = self.sensor.frames_missed;
         self.out
     }
 
-    /// One physics tick: the target moves; a frame and a filter step, a guidance decision when due.
+    /// One physics tick: the simulated target moves; the tracker measures, estimates and
+    /// decides when due; its outcome goes to the log, the status line and the supervisor.
     fn tick(&mut self) {
-        let Self {
-            cfg,
-            shared,
-            world,
-            rng_target,
-            rng_meas,
-            rng_filter,
-            rng_guid,
-            model,
-            sensor,
-            field,
-            pf,
-            planner,
-            lawn,
-            target,
-            out,
-            ..
-        } = self;
-        let d = &cfg.daemon;
-        let dt = 1.0 / cfg.timing.physics_hz;
-        self.tick += 1;
-        let t = self.tick as f64 * dt;
-        if field.is_none() {
-            target.step(&world.road, dt, rng_target);
+        let synthetic = self.sensor.field.is_none();
+        if synthetic {
+            self.target
+                .step(&self.world.road, self.physics_dt_s, &mut self.rng_target);
         }
-        let snapshot = *shared.vehicle.lock().expect("shared poisoned");
-        if let Some(s) = snapshot {
-            if !s.link_lost {
-                self.last_pose = Some(s.pose);
-            }
+        let view = self.shared.supervisor_view();
+        let snapshot = view.vehicle;
+        self.sensor.camera_frozen = view.camera_frozen;
+        if let Some(s) = snapshot.filter(|s| !s.link_lost) {
+            self.last_pose = Some(s.pose);
         }
-        let link_lost = snapshot.map_or(true, |s| s.link_lost);
-        let Some(pose) = self.last_pose else { return };
-        let agent = Enu2::new(pose.position_ned_m[1], pose.position_ned_m[0]);
-
-        if t + 1e-9 >= self.next_filter as f64 / cfg.timing.filter_hz {
-            self.next_filter += 1;
+        self.sensor.telemetry_pose = self.last_pose;
+        self.sensor
+            .synthetic
+            .set_target(self.target.position_enu, self.target.heading_enu_rad);
+        let input = TickInput {
+            vehicle_enu: self.last_pose.map(|p| p.position_enu()),
+            link_lost: snapshot.map_or(true, |s| s.link_lost),
             // No ground truth in the field.
-            let truth = if field.is_some() {
-                Enu2::new(f64::NAN, f64::NAN)
-            } else {
-                target.position_enu
-            };
-            let started = Instant::now();
-            let frame_seed = rand::Rng::gen(rng_meas);
-            let mut frozen = shared.camera_frozen.load(Ordering::Relaxed);
-            let mut pose = pose;
-            let mut agent = agent;
-            let field_z = match field.as_mut() {
-                Some(f) if !frozen => {
-                    match f.look(shared, (pf.mean(), pf.covariance()), &mut sensor.stats) {
-                        Some((p, z)) => {
-                            pose = p;
-                            agent = Enu2::new(p.position_ned_m[1], p.position_ned_m[0]);
-                            Some(z)
-                        }
-                        None => {
-                            frozen = true;
-                            None
-                        }
-                    }
-                }
-                _ => None,
-            };
-            let z = if frozen {
-                out.frames_missed += 1;
-                None
-            } else if let Some(z) = field_z {
-                self.last_frame_s = t;
-                z
-            } else {
-                self.last_frame_s = t;
-                match sensor.measure(
-                    &agent,
-                    &truth,
-                    target.heading_enu_rad,
-                    Some((pf.mean(), pf.covariance())),
-                    frame_seed,
-                ) {
-                    Ok(z) => z,
-                    Err(e) => {
-                        tracing::warn!("camera frame dropped: {e}");
-                        None
-                    }
-                }
-            };
-            let measured = Instant::now();
-            // Without a frame nothing was looked at: predict only, no negative information.
-            let stepped = if frozen {
-                pf.step_blind(model.as_mut(), rng_filter)
-            } else {
-                pf.step(model.as_mut(), z, &agent, world, rng_filter)
-            };
-            let n_eff = match stepped {
-                Ok(r) => r.n_eff,
-                Err(e) => {
-                    tracing::error!("filter step failed: {e}");
-                    f64::NAN
-                }
-            };
-            // From the frame's capture (the end of its rendering) to the updated filter.
-            let render_ms = if field.is_some() {
-                0.0
-            } else {
-                sensor.last_render_ms
-            };
-            self.last_frame_ms = started.elapsed().as_secs_f64() * 1e3 - render_ms;
-            out.filter_ms.push(self.last_frame_ms);
-            out.detect_ms
-                .push((measured - started).as_secs_f64() * 1e3 - render_ms);
-            out.update_ms.push(measured.elapsed().as_secs_f64() * 1e3);
-            if z.is_some() {
-                self.last_seen_s = t;
+            truth_enu: synthetic.then_some(self.target.position_enu),
+        };
+        let out = match self.tracker.tick(&input, &mut self.sensor, &self.clock) {
+            Ok(out) => out,
+            Err(e) => {
+                tracing::error!("tracker: {e}");
+                return;
             }
-            self.state = if link_lost {
-                TrackState::LinkLost
-            } else if t - self.last_frame_s > d.camera_timeout_s {
-                if self.state != TrackState::CameraLost {
-                    tracing::error!(
-                        "camera: no frame for {} s; holding position",
-                        d.camera_timeout_s
+        };
+        if let Some(step) = out.step {
+            self.record(step, snapshot.and_then(|s| s.mode), view.faults);
+        }
+        if let Some(decision) = out.decision {
+            self.apply(decision);
+        }
+    }
+
+    fn record(
+        &mut self,
+        step: StepOutcome,
+        mode: Option<crate::autopilot::modes::Mode>,
+        faults: String,
+    ) {
+        if let Some(e) = &step.filter_error {
+            tracing::error!("filter step failed: {e}");
+        }
+        if step.camera_lost_now {
+            tracing::error!(
+                "camera: no frame for {} s; holding position",
+                self.camera_timeout_s
+            );
+        }
+        self.last_frame_ms = self.sensor.detect_ms + step.update_ms;
+        self.out.filter_ms.push(self.last_frame_ms);
+        self.out.detect_ms.push(self.sensor.detect_ms);
+        self.out.update_ms.push(step.update_ms);
+        self.shared
+            .from_pipeline
+            .lock()
+            .expect("shared poisoned")
+            .status = Some(Status {
+            t_s: step.record.t_s,
+            seen: step.record.measurement_enu.is_some(),
+            n_eff: step.record.n_eff,
+            entropy: step.entropy,
+            state: step.state,
+        });
+        self.out.records.push(FlightRecord {
+            pose: self
+                .sensor
+                .observed_pose
+                .expect("a filter step runs only once the vehicle has a pose"),
+            state: step.state,
+            frame: step.frame,
+            command: step.command,
+            entropy: step.entropy,
+            vehicle_mode: mode,
+            faults,
+            step: step.record,
+        });
+    }
+
+    fn apply(&mut self, decision: Decision) {
+        let budget = self.guidance_budget_ms;
+        match decision {
+            Decision::Command {
+                command,
+                compute_ms,
+            } => {
+                self.out.guidance_ms.push(compute_ms);
+                self.out.latency_ms.push(self.last_frame_ms + compute_ms);
+                self.shared
+                    .from_pipeline
+                    .lock()
+                    .expect("shared poisoned")
+                    .command = Some(command);
+            }
+            Decision::Overrun { compute_ms } => {
+                self.out.guidance_ms.push(compute_ms);
+                self.out.guidance_overruns += 1;
+                tracing::warn!(
+                    "guidance took {compute_ms:.0} ms (budget {budget} ms): decision skipped"
+                );
+            }
+            Decision::Failed {
+                reason,
+                compute_ms,
+                over_budget,
+            } => {
+                tracing::error!("guidance failed: {reason}");
+                self.out.guidance_ms.push(compute_ms);
+                if over_budget {
+                    self.out.guidance_overruns += 1;
+                    tracing::warn!(
+                        "guidance took {compute_ms:.0} ms (budget {budget} ms): decision skipped"
                     );
                 }
-                TrackState::CameraLost
-            } else if t - self.last_seen_s > d.target_lost_after_s {
-                TrackState::Lost
-            } else {
-                TrackState::Tracking
-            };
-            out.records.push(FlightRecord {
-                step: StepRecord {
-                    t_s: t,
-                    target_enu: truth,
-                    agent_enu: agent,
-                    waypoint_enu: match self.command {
-                        Some(Command::GoTo(w)) => w,
-                        _ => agent,
-                    },
-                    measurement_enu: z,
-                    estimate_enu: pf.mean(),
-                    cov_m2: pf.covariance(),
-                    n_eff,
-                    eer: self.last_eer,
-                    target_occluded: world.is_occluded(&truth),
-                    target_in_footprint: world.footprint.contains(&agent, &truth),
-                },
-                pose,
-                state: self.state,
-                frame: !frozen,
-                command: self.command,
-                entropy: self.entropy,
-                vehicle_mode: snapshot.and_then(|s| s.mode),
-                faults: shared.faults.lock().expect("shared poisoned").clone(),
-            });
-            *shared.status.lock().expect("shared poisoned") = Some(Status {
-                t_s: t,
-                seen: z.is_some(),
-                n_eff,
-                entropy: self.entropy,
-                state: self.state,
-            });
-        }
-
-        if t + 1e-9 >= self.next_guid as f64 / cfg.timing.guidance_hz {
-            self.next_guid += 1;
-            if self.state == TrackState::LinkLost {
-                // No commands decided on stale vehicle self.state.
-                return;
-            }
-            let started = Instant::now();
-            let fallback = self.state == TrackState::Lost;
-            let decided = match (fallback, d.target_lost_fallback.as_str()) {
-                _ if self.state == TrackState::CameraLost => Some(Command::HoldHere),
-                (true, "hold") => Some(Command::HoldHere),
-                (true, "lawn") => Some(Command::GoTo(lawn.next_point())),
-                _ => match planner.plan(pf, model.as_mut(), &agent, world, rng_guid) {
-                    Ok(dec) => {
-                        self.entropy = dec.h_now;
-                        self.last_eer = dec.eer;
-                        Some(Command::GoTo(dec.waypoint_enu))
-                    }
-                    Err(e) => {
-                        tracing::error!("guidance failed: {e}");
-                        None
-                    }
-                },
-            };
-            let ms = started.elapsed().as_secs_f64() * 1e3;
-            out.guidance_ms.push(ms);
-            if ms > d.guidance_budget_ms {
-                out.guidance_overruns += 1;
-                tracing::warn!(
-                    "guidance took {ms:.0} ms (budget {} ms): decision skipped",
-                    d.guidance_budget_ms
-                );
-                return;
-            }
-            if let Some(c) = decided {
-                let c = match c {
-                    Command::GoTo(w) => Command::GoTo(world.workspace_enu.clamp(&w)),
-                    h => h,
-                };
-                self.command = Some(c);
-                out.latency_ms.push(self.last_frame_ms + ms);
-                *shared.command.lock().expect("shared poisoned") = Some(c);
             }
         }
     }

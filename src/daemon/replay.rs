@@ -9,12 +9,13 @@ use serde::Serialize;
 
 use super::flight_log::LoggedStep;
 use crate::config::Config;
-use crate::estimation::{FilterError, FilterParams, ParticleFilter};
-use crate::guidance::{EerParams, EerPlanner};
-use crate::motion::{self, MotionError};
+use crate::guidance::GuidanceKind;
 use crate::rng::{stream_rng, Stream};
+use crate::tracker::{
+    Command, Decision, EstimatorKind, FrozenClock, Observation, TickInput, Tracker, TrackerError,
+    UnknownEstimator,
+};
 use crate::world::geometry::Enu2;
-use crate::world::World;
 
 /// What the replay found.
 #[derive(Debug, Clone, Serialize)]
@@ -35,55 +36,62 @@ pub struct ReplayReport {
 /// Why a replay failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
-    /// The motion model.
+    /// The log's motion model is not one infotrack has.
     #[error(transparent)]
-    Motion(#[from] MotionError),
-    /// The filter.
+    Motion(#[from] UnknownEstimator),
+    /// The tracker (its motion model, its filter).
     #[error(transparent)]
-    Filter(#[from] FilterError),
+    Tracker(#[from] TrackerError),
 }
 
 /// Replays `steps` (from [`super::flight_log::parse`]) with the flight's `seed` and motion
-/// model.
+/// model, through the same tracker the flight ran (without its failsafes: the flight's
+/// frames, taken or not, are the log's).
 pub fn replay(
     cfg: &Config,
     motion_name: &str,
     seed: u64,
     steps: &[LoggedStep],
 ) -> Result<ReplayReport, ReplayError> {
-    let world = World::from_config(cfg);
     // The streams the pipeline used, in the order it drew from them.
-    let mut rng_filter = stream_rng(seed, 0, Stream::Filter, 0);
-    let mut rng_guid = stream_rng(seed, 0, Stream::Guidance, 0);
-    let mut model = motion::build(motion_name, cfg)?;
-    let mut pf = ParticleFilter::new(
-        FilterParams::from_config(cfg),
-        world.workspace_enu,
-        &mut rng_filter,
-    );
-    let mut planner = EerPlanner::new(EerParams::from_config(cfg));
+    let mut tracker = Tracker::new(
+        cfg.tracker_params(GuidanceKind::Eer, false),
+        cfg.world(),
+        &EstimatorKind::parse(motion_name)?,
+        stream_rng(seed, 0, Stream::Filter, 0),
+        stream_rng(seed, 0, Stream::Guidance, 0),
+    )?;
     let mut max_diff: f64 = 0.0;
     let (mut wp_sum, mut wp_n) = (0.0, 0usize);
     let mut estimates = Vec::with_capacity(steps.len());
     for s in steps {
-        if s.frame {
-            pf.step(
-                model.as_mut(),
-                s.measurement_enu,
-                &s.vehicle_enu,
-                &world,
-                &mut rng_filter,
-            )?;
+        let observation = if s.frame {
+            Observation::Frame {
+                taken_from_enu: s.vehicle_enu,
+                z: s.measurement_enu,
+            }
         } else {
-            pf.step_blind(model.as_mut(), &mut rng_filter)?;
-        }
-        let est = pf.mean();
+            Observation::NoFrame
+        };
+        let input = TickInput {
+            vehicle_enu: Some(s.vehicle_enu),
+            link_lost: false,
+            truth_enu: None,
+        };
+        let step = tracker.update(s.t_s, observation, &input, &FrozenClock)?;
+        let est = step.record.estimate_enu;
         max_diff = max_diff.max((est - s.estimate_enu).norm());
         estimates.push(est);
         if let Some(flown) = s.command_enu {
-            let d = planner.plan(&pf, model.as_mut(), &s.vehicle_enu, &world, &mut rng_guid)?;
-            wp_sum += (d.waypoint_enu - flown).norm();
-            wp_n += 1;
+            let decided = tracker.decide(s.t_s, &s.vehicle_enu, None, &FrozenClock)?;
+            if let Some(Decision::Command {
+                command: Command::GoTo(w),
+                ..
+            }) = decided
+            {
+                wp_sum += (w - flown).norm();
+                wp_n += 1;
+            }
         }
     }
     Ok(ReplayReport {

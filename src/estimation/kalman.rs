@@ -3,8 +3,22 @@
 
 use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector4};
 
-use crate::config::Config;
 use crate::world::geometry::{BoundsEnu, Enu2};
+
+/// The Kalman filter's parameters (the configuration assembles them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct KalmanParams {
+    /// Filter period, s.
+    pub dt_s: f64,
+    /// Diagonal of the process noise Q: m^2, m^2, (m/s)^2, (m/s)^2.
+    pub process_noise_diag: [f64; 4],
+    /// Diagonal of the initial covariance P0 (same units).
+    pub initial_cov_diag: [f64; 4],
+    /// Measurement noise R, m^2.
+    pub measurement_noise_cov_m2: [[f64; 2]; 2],
+    /// The workspace, world ENU (the state is kept inside it).
+    pub workspace_enu: BoundsEnu,
+}
 
 /// Constant-velocity Kalman filter.
 ///
@@ -25,19 +39,19 @@ pub struct KalmanFilter {
 }
 
 impl KalmanFilter {
-    /// From a validated configuration.
-    pub fn from_config(c: &Config) -> Self {
-        let dt = c.filter_dt_s();
+    /// A filter with these parameters, not yet initialised (its first measurement does).
+    pub fn new(params: KalmanParams) -> Self {
+        let dt = params.dt_s;
         let mut f = Matrix4::identity();
         f[(0, 2)] = dt;
         f[(1, 3)] = dt;
-        let r = c.measurement.noise_cov_m2;
-        let ws = c.workspace_enu;
+        let r = params.measurement_noise_cov_m2;
+        let ws = params.workspace_enu;
         let mut kf = Self {
             f,
-            q: Matrix4::from_diagonal(&Vector4::from(c.kalman.process_noise_diag)),
+            q: Matrix4::from_diagonal(&Vector4::from(params.process_noise_diag)),
             r: Matrix2::new(r[0][0], r[0][1], r[1][0], r[1][1]),
-            p0: Matrix4::from_diagonal(&Vector4::from(c.kalman.initial_cov_diag)),
+            p0: Matrix4::from_diagonal(&Vector4::from(params.initial_cov_diag)),
             h: Matrix2x4::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0),
             x: Vector4::zeros(),
             p: Matrix4::zeros(),
@@ -113,14 +127,15 @@ impl KalmanFilter {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::Config;
     use rand::SeedableRng;
 
     #[test]
     fn tracks_a_constant_velocity_target_and_learns_its_velocity() {
         let c = Config::default_lab();
-        let world = crate::world::World::from_config(&c);
+        let world = c.world();
         let mut rng = crate::rng::CoreRng::seed_from_u64(5);
-        let mut kf = KalmanFilter::from_config(&c);
+        let mut kf = KalmanFilter::new(c.kalman_params());
         assert!(!kf.is_initialised());
         let v = Enu2::new(0.2, -0.1);
         let dt = c.filter_dt_s();
@@ -139,7 +154,7 @@ mod tests {
     #[test]
     fn covariance_grows_without_measurements() {
         let c = Config::default_lab();
-        let mut kf = KalmanFilter::from_config(&c);
+        let mut kf = KalmanFilter::new(c.kalman_params());
         kf.step(Some(Enu2::zeros()));
         let d0 = kf.covariance().determinant();
         for _ in 0..10 {

@@ -4,7 +4,7 @@
 pub mod kalman;
 pub mod particle_filter;
 
-pub use kalman::KalmanFilter;
+pub use kalman::{KalmanFilter, KalmanParams};
 pub use particle_filter::{
     FilterCounters, FilterError, FilterParams, ParticleFilter, ResampleAction, StepReport,
 };

@@ -10,7 +10,6 @@ use rand::Rng;
 use rand_distr::{Distribution, Exp1, StandardNormal};
 use thiserror::Error;
 
-use crate::config::Config;
 use crate::motion::{Histories, MotionError, MotionModel};
 use crate::world::geometry::{BoundsEnu, Enu2};
 use crate::world::measurement::Gaussian2;
@@ -24,7 +23,7 @@ pub enum FilterError {
     Motion(#[from] MotionError),
 }
 
-/// The filter's parameters, from the configuration.
+/// The filter's parameters (the configuration assembles them).
 #[derive(Debug, Clone)]
 pub struct FilterParams {
     /// N.
@@ -47,28 +46,6 @@ pub struct FilterParams {
     pub init_speed_max_mps: f64,
     /// Filter period, s.
     pub dt_s: f64,
-}
-
-impl FilterParams {
-    /// From a validated configuration.
-    pub fn from_config(c: &Config) -> Self {
-        let q = c.filter.process_noise_cov_m2;
-        Self {
-            particles: c.filter.particles,
-            history_len: c.filter.history_len,
-            process_noise: Gaussian2::new([
-                [2.0 * q[0][0], 2.0 * q[0][1]],
-                [2.0 * q[1][0], 2.0 * q[1][1]],
-            ]),
-            resample_threshold: c.filter.resample_threshold,
-            reseed_threshold: c.filter.reseed_threshold,
-            roughening: c.filter.roughening,
-            miss_probability: c.filter.miss_probability,
-            max_outside_fraction: c.filter.max_outside_fraction,
-            init_speed_max_mps: c.motion.cv_max_speed_mps,
-            dt_s: c.filter_dt_s(),
-        }
-    }
 }
 
 /// What the filter did to its particle set in one step.

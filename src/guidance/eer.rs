@@ -31,14 +31,13 @@
 use rand::Rng;
 
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
-use crate::config::Config;
 use crate::estimation::ParticleFilter;
 use crate::motion::{Histories, MotionError, MotionModel};
 use crate::world::geometry::Enu2;
 use crate::world::measurement::Gaussian2;
 use crate::world::World;
 
-/// EER parameters, from the configuration.
+/// EER parameters (the configuration assembles them).
 #[derive(Debug, Clone)]
 pub struct EerParams {
     /// N_H.
@@ -57,27 +56,6 @@ pub struct EerParams {
     pub miss_probability: f64,
     /// Process noise added at each rollout step: N(0, 2Q).
     pub process_noise: Gaussian2,
-}
-
-impl EerParams {
-    /// From a validated configuration.
-    pub fn from_config(c: &Config) -> Self {
-        let g = &c.guidance;
-        let q = c.filter.process_noise_cov_m2;
-        Self {
-            entropy_particles: g.entropy_particles,
-            measurements_per_particle: g.measurements_per_particle,
-            horizon_steps: g.horizon_steps,
-            grid_side: g.candidate_grid_side,
-            reach_m: c.agent.speed_limit_mps * g.horizon_steps as f64 * c.filter_dt_s(),
-            kernel: Gaussian2::new(g.entropy_kernel_cov_m2),
-            miss_probability: c.filter.miss_probability,
-            process_noise: Gaussian2::new([
-                [2.0 * q[0][0], 2.0 * q[0][1]],
-                [2.0 * q[1][0], 2.0 * q[1][1]],
-            ]),
-        }
-    }
 }
 
 /// Everything the evaluation needs, after the rollout: pure data.

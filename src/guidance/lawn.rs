@@ -1,8 +1,24 @@
 //! The LAWN baseline's boustrophedon (lawnmower) sweep: vertical legs joined by
 //! semicircles, traversed one point per guidance step, back and forth.
 
-use crate::config::LawnConfig;
 use crate::world::geometry::Enu2;
+use serde::{Deserialize, Serialize};
+
+/// The lawnmower (boustrophedon) sweep of the LAWN baseline.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LawnConfig {
+    /// x of each vertical leg, metres, in sweep order.
+    pub legs_x_m: Vec<f64>,
+    /// Southern end of the legs, metres.
+    pub y_min_m: f64,
+    /// Northern end of the legs, metres.
+    pub y_max_m: f64,
+    /// Distance between consecutive sweep points, metres.
+    pub point_spacing_m: f64,
+    /// A measurement younger than this is tracked instead of sweeping, seconds.
+    pub track_measurement_for_s: f64,
+}
 
 /// The sweep path and where along it the agent is.
 #[derive(Debug, Clone)]

@@ -16,7 +16,7 @@ use std::fmt;
 use std::str::FromStr;
 
 pub use eer::{EerDecision, EerParams, EerPlanner};
-pub use lawn::LawnmowerPath;
+pub use lawn::{LawnConfig, LawnmowerPath};
 
 /// A guidance law.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]

@@ -19,7 +19,7 @@ use mavlink::MavHeader;
 use super::params::ParamTable;
 use super::vehicle::{KinematicState, Limits};
 use crate::autopilot::modes::{Flavor, Mode};
-use crate::autopilot::params_file::{decode_wire, encode_wire, ParamType};
+use crate::autopilot::params_file::{decode_wire, encode_wire, mav_param_type_of};
 
 /// How the mock is set up.
 #[derive(Debug, Clone)]
@@ -123,33 +123,6 @@ fn header_ack(cmd: MavCmd, result: MavResult, to: &MavHeader) -> MavMessage {
 
 fn param_id_str(id: &mavlink::types::CharArray<16>) -> String {
     id.to_str().unwrap_or("").trim_end_matches('\0').to_string()
-}
-
-/// The MAV_PARAM_TYPE of a ParamType.
-pub fn mav_param_type_of(t: ParamType) -> MavParamType {
-    match t {
-        ParamType::Uint8 => MavParamType::MAV_PARAM_TYPE_UINT8,
-        ParamType::Int8 => MavParamType::MAV_PARAM_TYPE_INT8,
-        ParamType::Uint16 => MavParamType::MAV_PARAM_TYPE_UINT16,
-        ParamType::Int16 => MavParamType::MAV_PARAM_TYPE_INT16,
-        ParamType::Uint32 => MavParamType::MAV_PARAM_TYPE_UINT32,
-        ParamType::Int32 => MavParamType::MAV_PARAM_TYPE_INT32,
-        ParamType::Real32 => MavParamType::MAV_PARAM_TYPE_REAL32,
-    }
-}
-
-/// The ParamType of a MAV_PARAM_TYPE, if the link supports it.
-pub fn param_type_of(t: MavParamType) -> Option<ParamType> {
-    Some(match t {
-        MavParamType::MAV_PARAM_TYPE_UINT8 => ParamType::Uint8,
-        MavParamType::MAV_PARAM_TYPE_INT8 => ParamType::Int8,
-        MavParamType::MAV_PARAM_TYPE_UINT16 => ParamType::Uint16,
-        MavParamType::MAV_PARAM_TYPE_INT16 => ParamType::Int16,
-        MavParamType::MAV_PARAM_TYPE_UINT32 => ParamType::Uint32,
-        MavParamType::MAV_PARAM_TYPE_INT32 => ParamType::Int32,
-        MavParamType::MAV_PARAM_TYPE_REAL32 => ParamType::Real32,
-        _ => return None,
-    })
 }
 
 impl MockAutopilot {

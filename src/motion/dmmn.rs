@@ -21,8 +21,7 @@ use ort::session::Session;
 use ort::value::{TensorElementType, TensorRef, ValueType};
 use serde::Deserialize;
 
-use super::{Histories, MotionError, MotionModel};
-use crate::config::Config;
+use super::{Histories, MotionError, MotionModel, MotionParams};
 use crate::world::geometry::Enu2;
 
 const NAME: &str = "dmmn";
@@ -79,22 +78,22 @@ impl DmmnMetadata {
     }
 
     /// Checks the model was trained for this filter: same K_in and period.
-    pub fn check_against(&self, cfg: &Config, path: &Path) -> Result<(), MotionError> {
-        if self.k_in != cfg.filter.history_len {
+    pub fn check_against(&self, params: &MotionParams, path: &Path) -> Result<(), MotionError> {
+        if self.k_in != params.history_len {
             return Err(err(format!(
                 "model metadata {} says K_in = {}, but filter.history_len = {}",
                 path.display(),
                 self.k_in,
-                cfg.filter.history_len
+                params.history_len
             )));
         }
-        let dt = cfg.filter_dt_s();
+        let dt = params.dt_s;
         if (self.dt_s - dt).abs() > 1e-3 * dt {
             return Err(err(format!(
                 "model metadata {} says dt = {} s, but timing.filter_hz = {} gives {} s",
                 path.display(),
                 self.dt_s,
-                cfg.timing.filter_hz,
+                1.0 / dt,
                 dt
             )));
         }
@@ -171,7 +170,7 @@ pub fn metadata_path(model: &Path) -> PathBuf {
 
 impl Dmmn {
     /// Loads the model and its metadata and checks both against the configuration.
-    pub fn load(model_path: &Path, cfg: &Config) -> Result<Self, MotionError> {
+    pub fn load(model_path: &Path, params: &MotionParams) -> Result<Self, MotionError> {
         if !model_path.is_file() {
             return Err(err(format!(
                 "model file {} not found (set motion.dmmn_model; relative paths are from the current directory)",
@@ -180,8 +179,8 @@ impl Dmmn {
         }
         let meta_path = metadata_path(model_path);
         let metadata = DmmnMetadata::load(&meta_path)?;
-        metadata.check_against(cfg, &meta_path)?;
-        let env = environment(cfg.motion.onnxruntime_library.as_deref())?;
+        metadata.check_against(params, &meta_path)?;
+        let env = environment(params.onnxruntime_library.as_deref())?;
         let session = Session::builder(&env)
             .and_then(|b| Ok(b.with_optimization_level(GraphOptimizationLevel::Level3)?))
             .and_then(|b| Ok(b.with_intra_threads(1)?))

@@ -14,20 +14,36 @@ use thiserror::Error;
 pub use constant_velocity::ConstantVelocity;
 pub use histories::Histories;
 
-use crate::config::Config;
+use std::path::PathBuf;
+
 use crate::world::geometry::Enu2;
 
 /// Names of the motion models a particle filter can use (`--motion`).
 pub const MODEL_NAMES: &[&str] = &["cv", "dmmn"];
 
-/// Builds the named motion model for a configuration.
-pub fn build(name: &str, cfg: &Config) -> Result<Box<dyn MotionModel>, MotionError> {
+/// What the motion models are built from (the configuration assembles it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MotionParams {
+    /// Filter period dt, s: the step every model predicts over.
+    pub dt_s: f64,
+    /// History length the filter keeps (K_in).
+    pub history_len: usize,
+    /// Constant-velocity model: the largest speed a particle is given, m/s.
+    pub cv_max_speed_mps: f64,
+    /// The learned model's ONNX file (`dmmn.json` beside it).
+    pub dmmn_model: PathBuf,
+    /// The ONNX Runtime library to load; `None`: the default search.
+    pub onnxruntime_library: Option<PathBuf>,
+}
+
+/// Builds the named motion model.
+pub fn build(name: &str, params: &MotionParams) -> Result<Box<dyn MotionModel>, MotionError> {
     match name {
         "cv" => Ok(Box::new(ConstantVelocity::new(
-            cfg.motion.cv_max_speed_mps,
-            cfg.filter_dt_s(),
+            params.cv_max_speed_mps,
+            params.dt_s,
         ))),
-        "dmmn" => Ok(Box::new(dmmn::Dmmn::load(&cfg.motion.dmmn_model, cfg)?)),
+        "dmmn" => Ok(Box::new(dmmn::Dmmn::load(&params.dmmn_model, params)?)),
         other => Err(MotionError::Backend {
             model: other.to_string(),
             message: format!(

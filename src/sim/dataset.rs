@@ -3,15 +3,14 @@
 //! same CSV format as the per-step flight logs, so a model can be trained the same way on
 //! real flights.
 
-use super::target::TargetSim;
 use crate::config::Config;
 use crate::metrics::StepRecord;
 use crate::rng::{stream_rng, CoreRng, Stream};
-use crate::world::World;
+use crate::simulated::TargetSim;
 
 /// Records `duration_s` of target motion, one noisy position per filter period.
 pub fn record(cfg: &Config, seed: u64, duration_s: f64) -> Vec<StepRecord> {
-    let world = World::from_config(cfg);
+    let world = cfg.world();
     let mut rng_target: CoreRng = stream_rng(seed, u64::MAX, Stream::Tools, 1);
     let mut rng_meas: CoreRng = stream_rng(seed, u64::MAX, Stream::Tools, 2);
     let mut target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);

@@ -1,11 +1,10 @@
-//! Simulators and the closed-loop run that the Monte Carlo benchmark repeats.
+//! The simulator (`infotrack sim`): one simulated run around the tracker, the Monte Carlo
+//! benchmark that repeats it, and the data-set recorder. The simulated sources themselves
+//! live in [`crate::simulated`], where the daemon uses them too.
 
-pub mod agent;
 pub mod dataset;
 pub mod monte_carlo;
 pub mod run;
-pub mod target;
-pub mod vision_sensor;
 
 pub use monte_carlo::{MonteCarlo, MonteCarloResult};
 pub use run::{check_combination, run_once, EstimatorKind, RunError, RunOutput, RunSpec};

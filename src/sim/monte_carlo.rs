@@ -12,7 +12,6 @@ use super::run::{check_combination, run_once, EstimatorKind, RunError, RunOutput
 use crate::config::Config;
 use crate::guidance::GuidanceKind;
 use crate::metrics::{mean_sd, median, welch_t_test, MeanSd, RunSummary, WelchResult};
-use crate::world::World;
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -120,7 +119,7 @@ impl MonteCarlo {
     /// Runs the benchmark. Combinations that make no sense are refused with their reason
     /// (listed in the result); it is an error only if nothing is left to run.
     pub fn run(&self, cfg: &Config) -> Result<MonteCarloResult, RunError> {
-        let world = World::from_config(cfg);
+        let world = cfg.world();
         let mut combos = Vec::new();
         let mut refused = Vec::new();
         let mut first_err = None;
@@ -136,9 +135,7 @@ impl MonteCarlo {
             }
         }
         if combos.is_empty() {
-            return Err(
-                first_err.expect("no combination means at least one refusal or empty lists")
-            );
+            return Err(first_err.map_or(RunError::NothingToRun, RunError::from));
         }
         let jobs: Vec<(usize, u64)> = (0..combos.len())
             .flat_map(|c| (0..self.runs).map(move |r| (c, r)))

@@ -7,7 +7,11 @@
 //! * local NED: the autopilot's LOCAL_POSITION_NED frame, origin on the ground;
 //! * world ENU: the tracker's world, `x_east = y_ned`, `y_north = x_ned`.
 
+use crate::vision::InvalidSetting;
 use nalgebra::{Matrix3, Rotation3, Vector3};
+
+pub use crate::frames::VehiclePoseNed;
+use crate::frames::{PositionEnu, PositionNed};
 use serde::{Deserialize, Serialize};
 
 /// Pinhole intrinsics and distortion, as OpenCV's calibration writes them.
@@ -46,7 +50,11 @@ impl Intrinsics {
     }
 
     /// Checks that the numbers describe a camera.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidSetting> {
+        self.reason_invalid().map_err(InvalidSetting)
+    }
+
+    fn reason_invalid(&self) -> Result<(), String> {
         if self.width_px == 0 || self.height_px == 0 {
             return Err(format!(
                 "image size {}x{} px is empty",
@@ -159,31 +167,6 @@ impl CameraMount {
     }
 }
 
-/// The vehicle's pose in local NED at one instant.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct VehiclePoseNed {
-    /// Position, local NED, m (z negative above the ground).
-    pub position_ned_m: [f64; 3],
-    /// Roll, rad (body FRD relative to NED, ZYX Euler angles as in MAVLink ATTITUDE).
-    pub roll_rad: f64,
-    /// Pitch, rad.
-    pub pitch_rad: f64,
-    /// Yaw, rad, from north toward east.
-    pub yaw_rad: f64,
-}
-
-impl VehiclePoseNed {
-    /// Rotation taking body FRD vectors to local NED.
-    pub fn ned_from_body(&self) -> Rotation3<f64> {
-        Rotation3::from_euler_angles(self.roll_rad, self.pitch_rad, self.yaw_rad)
-    }
-
-    /// Altitude above the ground plane `z_ned = 0`, m.
-    pub fn altitude_m(&self) -> f64 {
-        -self.position_ned_m[2]
-    }
-}
-
 /// Intrinsics and mount together: the whole camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraModel {
@@ -215,7 +198,13 @@ impl CameraModel {
         }
         let t = -c.z / d.z;
         let g = c + t * d;
-        Some([g.y, g.x])
+        let g = PositionNed {
+            x_north_m: g.x,
+            y_east_m: g.y,
+            z_down_m: g.z,
+        }
+        .to_enu();
+        Some([g.x_east_m, g.y_north_m])
     }
 
     /// The pixel at which a world ENU point at height `z_up_m` appears, if in front of the
@@ -227,7 +216,13 @@ impl CameraModel {
         pose: &VehiclePoseNed,
     ) -> Option<[f64; 2]> {
         let (c, r_nc) = self.camera_in_ned(pose);
-        let p_ned = Vector3::new(p_enu[1], p_enu[0], -z_up_m);
+        let n = PositionEnu {
+            x_east_m: p_enu[0],
+            y_north_m: p_enu[1],
+            z_up_m,
+        }
+        .to_ned();
+        let p_ned = Vector3::new(n.x_north_m, n.y_east_m, n.z_down_m);
         self.intrinsics.project(&(r_nc.inverse() * (p_ned - c)))
     }
 
@@ -323,10 +318,10 @@ mod tests {
     fn bad_intrinsics_are_refused() {
         let mut i = Intrinsics::ideal(640, 480, 1.0);
         i.fx_px = -1.0;
-        assert!(i.validate().unwrap_err().contains("positive"));
+        assert!(i.validate().unwrap_err().0.contains("positive"));
         let mut i = Intrinsics::ideal(640, 480, 1.0);
         i.width_px = 0;
-        assert!(i.validate().unwrap_err().contains("empty"));
+        assert!(i.validate().unwrap_err().0.contains("empty"));
         assert!(Intrinsics::ideal(640, 480, 1.0).validate().is_ok());
     }
 }

@@ -3,6 +3,7 @@
 //! thread owns the capture (OpenCV blocks), so that a camera that stops delivering is
 //! noticed by a timeout on the consumer's side, reported, and reopened.
 
+use crate::vision::InvalidSetting;
 use std::path::PathBuf;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
 use std::thread::JoinHandle;
@@ -79,7 +80,11 @@ pub struct CaptureConfig {
 
 impl CaptureConfig {
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidSetting> {
+        self.reason_invalid().map_err(InvalidSetting)
+    }
+
+    fn reason_invalid(&self) -> Result<(), String> {
         CaptureSource::parse(&self.source).map_err(|e| e.to_string())?;
         if !(self.fps.is_finite() && self.fps >= 0.0) {
             return Err(format!("fps {} must be >= 0", self.fps));
@@ -155,7 +160,7 @@ pub struct Camera {
 impl Camera {
     /// Opens the source (an error here if it cannot be opened at all) and starts reading.
     pub fn open(cfg: CaptureConfig) -> Result<Self, VisionError> {
-        cfg.validate().map_err(VisionError::Config)?;
+        cfg.validate()?;
         let src = CaptureSource::parse(&cfg.source)?;
         let cap = open(&src, &cfg)?;
         let (tx, rx) = mpsc::sync_channel(4);

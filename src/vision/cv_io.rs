@@ -225,7 +225,7 @@ pub fn load_calibration(path: &Path) -> Result<Intrinsics, VisionError> {
         cy_px: k[5],
         distortion: [d[0], d[1], d[2], d[3], d.get(4).copied().unwrap_or(0.0)],
     };
-    intr.validate().map_err(bad)?;
+    intr.validate().map_err(|e| bad(e.0))?;
     Ok(intr)
 }
 

@@ -7,6 +7,7 @@
 //! (DICT_APRILTAG_36h11) was slower and 5x less accurate, and a pure-Rust port missed tags
 //! at full resolution. Speed comes from the region of interest instead.
 
+use crate::vision::InvalidSetting;
 use serde::{Deserialize, Serialize};
 
 use super::image::GrayImage;
@@ -115,7 +116,11 @@ impl Default for DetectorConfig {
 
 impl DetectorConfig {
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidSetting> {
+        self.reason_invalid().map_err(InvalidSetting)
+    }
+
+    fn reason_invalid(&self) -> Result<(), String> {
         if !(self.decimation >= 1.0 && self.decimation <= 8.0) {
             return Err(format!("decimation {} must be 1-8", self.decimation));
         }
@@ -147,7 +152,7 @@ pub struct AprilTagDetector {
 impl AprilTagDetector {
     /// A tag36h11 detector.
     pub fn new(cfg: DetectorConfig) -> Result<Self, VisionError> {
-        cfg.validate().map_err(VisionError::Config)?;
+        cfg.validate()?;
         let mut inner = apriltag::Detector::builder()
             .add_family_bits(apriltag::Family::tag_36h11(), cfg.max_hamming as usize)
             .build()

@@ -9,7 +9,7 @@
 pub mod camera_model;
 pub mod capture;
 pub mod cv_io;
-pub mod detect_bench;
+
 pub mod detector;
 pub mod image;
 pub mod pose_file;
@@ -18,6 +18,17 @@ pub mod render;
 pub mod tag_family;
 
 use thiserror::Error;
+
+/// A setting out of range, with what is wrong (the caller names the key).
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("{0}")]
+pub struct InvalidSetting(pub String);
+
+impl From<InvalidSetting> for VisionError {
+    fn from(e: InvalidSetting) -> Self {
+        Self::Config(e.0)
+    }
+}
 
 /// Why a vision operation failed.
 #[derive(Debug, Error)]

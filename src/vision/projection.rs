@@ -2,6 +2,7 @@
 //! under the tag's centre in world ENU, with a covariance propagated from pixel noise,
 //! attitude and altitude uncertainty through the same ray-ground intersection.
 
+use crate::vision::InvalidSetting;
 use serde::{Deserialize, Serialize};
 
 use super::camera_model::{CameraModel, GroundEnu, VehiclePoseNed};
@@ -34,7 +35,11 @@ impl Default for ProjectionNoise {
 
 impl ProjectionNoise {
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidSetting> {
+        self.reason_invalid().map_err(InvalidSetting)
+    }
+
+    fn reason_invalid(&self) -> Result<(), String> {
         for (k, v) in [
             ("pixel_sigma_px", self.pixel_sigma_px),
             ("tilt_sigma_rad", self.tilt_sigma_rad),
@@ -180,6 +185,6 @@ mod tests {
             pixel_sigma_px: f64::NAN,
             ..Default::default()
         };
-        assert!(bad.validate().unwrap_err().contains("pixel_sigma_px"));
+        assert!(bad.validate().unwrap_err().0.contains("pixel_sigma_px"));
     }
 }

@@ -1,10 +1,8 @@
 //! Planar geometry in the world ENU frame: points, axis-aligned bounds, polygons.
 
-use nalgebra::Vector2;
 use serde::{Deserialize, Serialize};
 
-/// A point or vector in the world frame: x east, y north, metres.
-pub type Enu2 = Vector2<f64>;
+pub use crate::frames::{wrap_angle, Enu2};
 
 /// An axis-aligned rectangle in the world ENU frame (metres).
 ///
@@ -150,17 +148,6 @@ impl PolygonEnu {
         }
         0.5 * s.abs()
     }
-}
-
-/// Wraps an angle to (-pi, pi].
-pub fn wrap_angle(a: f64) -> f64 {
-    let mut x = a % std::f64::consts::TAU;
-    if x > std::f64::consts::PI {
-        x -= std::f64::consts::TAU;
-    } else if x <= -std::f64::consts::PI {
-        x += std::f64::consts::TAU;
-    }
-    x
 }
 
 #[cfg(test)]

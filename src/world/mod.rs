@@ -6,7 +6,6 @@ pub mod geometry;
 pub mod measurement;
 pub mod road;
 
-use crate::config::Config;
 use camera::Footprint;
 use geometry::{BoundsEnu, Enu2, PolygonEnu};
 use measurement::MeasurementModel;
@@ -28,31 +27,21 @@ pub struct World {
 }
 
 impl World {
-    /// Builds the world from a validated configuration.
-    pub fn from_config(c: &Config) -> Self {
-        let occlusions = c
-            .occlusions
-            .iter()
-            .map(|o| {
-                PolygonEnu::new(
-                    o.vertices_enu_m
-                        .iter()
-                        .map(|v| Enu2::new(v[0], v[1]))
-                        .collect(),
-                )
-                .expect("validated at load")
-            })
-            .collect();
+    /// Builds the world from its parts (the configuration assembles them: see
+    /// `Config::world`).
+    pub fn new(
+        workspace_enu: BoundsEnu,
+        road: &road::RoadConfig,
+        occlusions: Vec<PolygonEnu>,
+        footprint: Footprint,
+        measurement: MeasurementModel,
+    ) -> Self {
         Self {
-            workspace_enu: c.workspace_enu,
-            road: RoadNetwork::from_config(&c.road),
+            workspace_enu,
+            road: RoadNetwork::from_config(road),
             occlusions,
-            footprint: Footprint::from_fov(
-                c.agent.altitude_m,
-                c.camera.fov_x_rad,
-                c.camera.fov_y_rad,
-            ),
-            measurement: MeasurementModel::new(c.measurement.noise_cov_m2),
+            footprint,
+            measurement,
         }
     }
 

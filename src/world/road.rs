@@ -3,7 +3,43 @@
 use rand::Rng;
 
 use super::geometry::Enu2;
-use crate::config::RoadConfig;
+use serde::{Deserialize, Serialize};
+
+/// A node of the road network.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodeConfig {
+    /// Identifier that edges refer to.
+    pub id: u32,
+    /// East coordinate, metres.
+    pub x_m: f64,
+    /// North coordinate, metres.
+    pub y_m: f64,
+}
+
+/// A directed edge of the road network with its transition probability.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EdgeConfig {
+    /// Node the edge leaves.
+    pub from: u32,
+    /// Node the edge enters.
+    pub to: u32,
+    /// Probability of taking this edge when at `from`; the edges leaving a node sum to 1.
+    pub p: f64,
+}
+
+/// The road network as a Markov chain.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoadConfig {
+    /// Nodes with their positions.
+    pub nodes: Vec<NodeConfig>,
+    /// Directed edges with transition probabilities.
+    pub edges: Vec<EdgeConfig>,
+    /// Node the target starts at.
+    pub start_node: u32,
+}
 
 /// A node's position and its outgoing transitions.
 #[derive(Debug, Clone)]

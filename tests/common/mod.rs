@@ -3,9 +3,9 @@
 
 use std::time::Duration;
 
-use infotrack::autopilot::frames::PositionEnu;
 use infotrack::autopilot::link::{LinkEvent, VehicleLink};
 use infotrack::autopilot::modes::Mode;
+use infotrack::frames::PositionEnu;
 
 /// A UDP port free at the time of asking.
 pub fn free_udp_port() -> u16 {

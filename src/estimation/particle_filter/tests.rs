@@ -1,3 +1,4 @@
+use crate::config::Config;
 use proptest::prelude::*;
 use rand::SeedableRng;
 
@@ -8,9 +9,9 @@ use crate::rng::CoreRng;
 fn setup(n: usize) -> (Config, World, ParticleFilter, CoreRng) {
     let mut c = Config::default_lab();
     c.filter.particles = n;
-    let world = World::from_config(&c);
+    let world = c.world();
     let mut rng = CoreRng::seed_from_u64(42);
-    let pf = ParticleFilter::new(FilterParams::from_config(&c), c.workspace_enu, &mut rng);
+    let pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
     (c, world, pf, rng)
 }
 

@@ -1,7 +1,7 @@
+use crate::config::Config;
 use rand::{Rng, SeedableRng};
 
 use super::*;
-use crate::estimation::FilterParams;
 use crate::motion::ConstantVelocity;
 use crate::rng::CoreRng;
 
@@ -38,7 +38,7 @@ fn fast_eer_equals_reference_on_random_inputs() {
     // A wide kernel and a moderate miss probability keep every term well away from
     // underflow in the reference's linear-domain arithmetic.
     c.guidance.entropy_kernel_cov_m2 = [[0.05, 0.01], [0.01, 0.04]];
-    let world = World::from_config(&c);
+    let world = c.world();
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(9);
     for (trial, &(n, n_m, p_miss)) in [(12, 1, 1e-3), (9, 3, 0.2), (15, 2, 1.0), (6, 1, 1e-10)]
@@ -72,7 +72,7 @@ fn fast_eer_equals_reference_on_random_inputs() {
 #[test]
 fn eer_prefers_the_candidate_that_sees_the_particles() {
     let c = Config::default_lab();
-    let world = World::from_config(&c);
+    let world = c.world();
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(2);
     // All mass in a 0.3 m cluster on open floor; one candidate over it, one far away.
@@ -107,7 +107,7 @@ fn eer_prefers_the_candidate_that_sees_the_particles() {
 #[test]
 fn occluded_particles_give_no_information() {
     let c = Config::default_lab();
-    let world = World::from_config(&c);
+    let world = c.world();
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(3);
     // Every particle inside occlusion 1: no candidate can measure or miss them.
@@ -142,11 +142,11 @@ fn occluded_particles_give_no_information() {
 #[test]
 fn planner_waypoints_stay_inside_the_geofence_and_count_candidates() {
     let c = Config::default_lab();
-    let world = World::from_config(&c);
+    let world = c.world();
     let mut rng = CoreRng::seed_from_u64(4);
-    let pf = ParticleFilter::new(FilterParams::from_config(&c), c.workspace_enu, &mut rng);
+    let pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
     let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
-    let mut planner = EerPlanner::new(EerParams::from_config(&c));
+    let mut planner = EerPlanner::new(c.eer_params());
     for agent in [
         Enu2::new(0.9, 1.9),
         Enu2::new(-2.9, -1.1),
@@ -170,11 +170,11 @@ fn all_particles_used_when_n_h_equals_n() {
     let mut c = Config::default_lab();
     c.filter.particles = 40;
     c.guidance.entropy_particles = 40;
-    let world = World::from_config(&c);
+    let world = c.world();
     let mut rng = CoreRng::seed_from_u64(5);
-    let pf = ParticleFilter::new(FilterParams::from_config(&c), c.workspace_enu, &mut rng);
+    let pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
     let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
-    let mut planner = EerPlanner::new(EerParams::from_config(&c));
+    let mut planner = EerPlanner::new(c.eer_params());
     let inp = planner.prepare(&pf, &mut model, &world, &mut rng).unwrap();
     assert_eq!(inp.current, pf.particles());
     assert!((inp.alpha.iter().sum::<f64>() - 1.0).abs() < 1e-12);
@@ -184,7 +184,7 @@ fn all_particles_used_when_n_h_equals_n() {
 fn fast_measured_entropy_equals_the_plain_formula() {
     use crate::guidance::entropy::entropy_measured;
     let c = Config::default_lab();
-    let world = World::from_config(&c);
+    let world = c.world();
     let kernel = Gaussian2::new([[0.02, 0.0], [0.0, 0.02]]);
     let mut rng = CoreRng::seed_from_u64(11);
     let inp = random_inputs(&mut rng, 40, 1, &world);

@@ -1,4 +1,5 @@
 use super::*;
+use crate::autopilot::params_file::ParamType;
 
 const GCS: MavHeader = MavHeader {
     system_id: 255,

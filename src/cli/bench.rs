@@ -1,134 +1,18 @@
 //! Timings of the core (`infotrack bench`): the particle filter step and the EER cycle, on
 //! the paper's scenario, single-threaded. The criterion benches in `benches/` time the same
-//! fixtures.
+//! fixtures (`benches/fixtures/mod.rs`).
 
 use std::time::Instant;
 
-use rand::SeedableRng;
 use serde::Serialize;
 
-use crate::config::Config;
-use crate::estimation::{FilterParams, ParticleFilter};
-use crate::guidance::{EerParams, EerPlanner};
-use crate::metrics::median;
-use crate::motion::dmmn::Dmmn;
-use crate::motion::{ConstantVelocity, MotionModel};
-use crate::rng::CoreRng;
-use crate::world::geometry::Enu2;
-use crate::world::World;
+use infotrack::config::Config;
+use infotrack::metrics::median;
+use infotrack::motion::dmmn::Dmmn;
 
-/// A filter mid-run on the lab scenario: `n` particles that have tracked a target for a few
-/// seconds with intermittent measurements, so resampling and negative information both occur.
-pub struct PfFixture {
-    /// Configuration used.
-    pub cfg: Config,
-    /// The world.
-    pub world: World,
-    /// The filter.
-    pub pf: ParticleFilter,
-    /// Its motion model.
-    pub model: Box<dyn MotionModel>,
-    /// Random stream.
-    pub rng: CoreRng,
-    k: u64,
-}
-
-impl PfFixture {
-    /// Builds the fixture with the constant-velocity model and warms the filter up.
-    pub fn new(n: usize, seed: u64) -> Self {
-        let cfg = Config::default_lab();
-        let model = ConstantVelocity::new(cfg.motion.cv_max_speed_mps, cfg.filter_dt_s());
-        Self::with_model(n, seed, Box::new(model))
-    }
-
-    /// Builds the fixture with `model` and warms the filter up.
-    pub fn with_model(n: usize, seed: u64, model: Box<dyn MotionModel>) -> Self {
-        let mut cfg = Config::default_lab();
-        cfg.filter.particles = n;
-        let world = World::from_config(&cfg);
-        let mut rng = CoreRng::seed_from_u64(seed);
-        let pf = ParticleFilter::new(FilterParams::from_config(&cfg), cfg.workspace_enu, &mut rng);
-        let mut f = Self {
-            cfg,
-            world,
-            pf,
-            model,
-            rng,
-            k: 0,
-        };
-        for _ in 0..30 {
-            f.step();
-        }
-        f
-    }
-
-    /// The true target of step k: a circle through open floor and one occlusion.
-    fn target(k: u64) -> Enu2 {
-        let a = k as f64 * 0.05;
-        Enu2::new(-1.0 + 0.9 * a.cos(), 0.4 + 0.9 * a.sin())
-    }
-
-    /// One filter step; measured on two steps out of three.
-    pub fn step(&mut self) {
-        self.k += 1;
-        let t = Self::target(self.k);
-        let agent = t + Enu2::new(0.1, 0.0);
-        let z = (self.k % 3 != 0 && !self.world.is_occluded(&t))
-            .then(|| self.world.measurement.measure(&t, &mut self.rng));
-        self.pf
-            .step(self.model.as_mut(), z, &agent, &self.world, &mut self.rng)
-            .expect("the benchmark's motion model failed");
-    }
-}
-
-/// An EER planner with its inputs prepared (the rollout done), ready to time `decide`.
-pub struct EerFixture {
-    /// The filter fixture (N = 500).
-    pub pf: PfFixture,
-    /// The planner.
-    pub planner: EerPlanner,
-    /// Agent position for candidate generation.
-    pub agent_enu: Enu2,
-}
-
-impl EerFixture {
-    /// N = `n` particles, N_H = `n_h`, K = 4, constant-velocity model.
-    pub fn new(n: usize, n_h: usize, seed: u64) -> Self {
-        Self::with_fixture(PfFixture::new(n, seed), n_h)
-    }
-
-    /// N_H = `n_h`, K = 4, on a prepared filter fixture.
-    pub fn with_fixture(mut pf: PfFixture, n_h: usize) -> Self {
-        let mut cfg = pf.cfg.clone();
-        cfg.guidance.entropy_particles = n_h;
-        cfg.guidance.horizon_steps = 4;
-        let mut planner = EerPlanner::new(EerParams::from_config(&cfg));
-        planner
-            .prepare(&pf.pf, pf.model.as_mut(), &pf.world, &mut pf.rng)
-            .expect("the benchmark's motion model failed");
-        let agent_enu = Enu2::new(-1.0, 0.4);
-        Self {
-            pf,
-            planner,
-            agent_enu,
-        }
-    }
-
-    /// The rollout (motion-model calls, process noise, simulated measurements).
-    pub fn prepare(&mut self) {
-        let p = &mut self.pf;
-        self.planner
-            .prepare(&p.pf, p.model.as_mut(), &p.world, &mut p.rng)
-            .expect("the benchmark's motion model failed");
-    }
-
-    /// Candidates, EER of each, argmax; returns the candidate count.
-    pub fn decide(&mut self) -> usize {
-        self.planner
-            .decide(&self.agent_enu, &self.pf.world)
-            .candidates
-    }
-}
+#[path = "../../benches/fixtures/mod.rs"]
+mod fixtures;
+use fixtures::{EerFixture, PfFixture};
 
 fn time_median(reps: usize, mut f: impl FnMut()) -> f64 {
     let mut t = Vec::with_capacity(reps);
@@ -217,7 +101,7 @@ pub fn run_dmmn(
 ) -> Result<DmmnTimes, String> {
     let mut cfg = Config::default_lab();
     cfg.motion.dmmn_model = model_path.to_path_buf();
-    let load = || Dmmn::load(model_path, &cfg).map_err(|e| e.to_string());
+    let load = || Dmmn::load(model_path, &cfg.motion_params()).map_err(|e| e.to_string());
     let mut m = load()?;
     let parameters = m.metadata().parameters;
     let reps = repetitions.min(200);

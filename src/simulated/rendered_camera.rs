@@ -101,12 +101,7 @@ impl VisionSensor {
         predicted: Option<(Enu2, nalgebra::Matrix2<f64>)>,
         frame_seed: u64,
     ) -> Result<Option<Enu2>, VisionError> {
-        let pose = VehiclePoseNed {
-            position_ned_m: [agent_enu.y, agent_enu.x, -self.altitude_m],
-            roll_rad: 0.0,
-            pitch_rad: 0.0,
-            yaw_rad: 0.0,
-        };
+        let pose = VehiclePoseNed::level_above(agent_enu, self.altitude_m);
         let scene = SceneEnu {
             target: Some(TargetAppearance {
                 position_enu_m: [target_enu.x, target_enu.y],

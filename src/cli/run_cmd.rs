@@ -8,7 +8,6 @@ use anyhow::{bail, Context, Result};
 use infotrack::config::Config;
 use infotrack::daemon::{self, flight_log, DaemonReport, RunOptions};
 use infotrack::report;
-use infotrack::world::World;
 
 /// Arguments of `infotrack run`.
 #[derive(clap::Args)]
@@ -189,7 +188,7 @@ pub fn fly(
             &dir.join("flight.csv"),
             flight_log::render(&report.output.records, opts.seed, &motion).as_bytes(),
         )?;
-        let world = World::from_config(cfg);
+        let world = cfg.world();
         report::plots::scene(
             &dir.join("scene.png"),
             &format!("{} | closed loop, {} guidance", cfg.name, "eer"),

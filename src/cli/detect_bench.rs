@@ -8,12 +8,14 @@ use std::time::Instant;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use super::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
-use super::detector::{AprilTagDetector, DetectorConfig, RoiPx, RoiSearch, SearchOutcome};
-use super::image::GrayImage;
-use super::render::{render, RenderOptions, SceneEnu, TargetAppearance};
-use super::tag_family::TagBitmap;
-use super::VisionError;
+use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
+use infotrack::vision::detector::{
+    AprilTagDetector, DetectorConfig, RoiPx, RoiSearch, SearchOutcome,
+};
+use infotrack::vision::image::GrayImage;
+use infotrack::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
+use infotrack::vision::tag_family::TagBitmap;
+use infotrack::vision::VisionError;
 
 /// One resolution's numbers.
 #[derive(Debug, Clone, Serialize)]
@@ -50,7 +52,7 @@ struct Case {
 }
 
 fn cases(w: u32, h: u32, n: usize, seed: u64) -> Vec<Case> {
-    let mut rng = crate::rng::CoreRng::seed_from_u64(seed);
+    let mut rng = infotrack::rng::CoreRng::seed_from_u64(seed);
     let cam = CameraModel {
         intrinsics: Intrinsics::ideal(w, h, 1.0),
         mount: CameraMount::nadir(),

@@ -1,0 +1,144 @@
+//! The configuration assembles each core component's own parameters: the core never sees
+//! the application's `Config`.
+
+use super::Config;
+use crate::estimation::{FilterParams, KalmanParams};
+use crate::guidance::{EerParams, GuidanceKind};
+use crate::motion::MotionParams;
+use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams};
+use crate::world::camera::Footprint;
+use crate::world::geometry::{Enu2, PolygonEnu};
+use crate::world::measurement::{Gaussian2, MeasurementModel};
+use crate::world::World;
+
+impl Config {
+    /// The world: roads, occlusions, workspace, footprint at the agent's altitude, the
+    /// measurement model.
+    pub fn world(&self) -> World {
+        World::new(
+            self.workspace_enu,
+            &self.road,
+            self.occlusion_polygons(),
+            Footprint::from_fov(
+                self.agent.altitude_m,
+                self.camera.fov_x_rad,
+                self.camera.fov_y_rad,
+            ),
+            MeasurementModel::new(self.measurement.noise_cov_m2),
+        )
+    }
+
+    /// The occlusions as polygons, world ENU.
+    pub fn occlusion_polygons(&self) -> Vec<PolygonEnu> {
+        self.occlusions
+            .iter()
+            .filter_map(|o| {
+                // Validated at load: every polygon has at least three distinct vertices.
+                PolygonEnu::new(
+                    o.vertices_enu_m
+                        .iter()
+                        .map(|v| Enu2::new(v[0], v[1]))
+                        .collect(),
+                )
+            })
+            .collect()
+    }
+
+    /// The particle filter's parameters.
+    pub fn filter_params(&self) -> FilterParams {
+        let f = &self.filter;
+        FilterParams {
+            particles: f.particles,
+            history_len: f.history_len,
+            process_noise: twice(f.process_noise_cov_m2),
+            resample_threshold: f.resample_threshold,
+            reseed_threshold: f.reseed_threshold,
+            roughening: f.roughening,
+            miss_probability: f.miss_probability,
+            max_outside_fraction: f.max_outside_fraction,
+            init_speed_max_mps: self.motion.cv_max_speed_mps,
+            dt_s: self.filter_dt_s(),
+        }
+    }
+
+    /// EER's parameters.
+    pub fn eer_params(&self) -> EerParams {
+        let g = &self.guidance;
+        EerParams {
+            entropy_particles: g.entropy_particles,
+            measurements_per_particle: g.measurements_per_particle,
+            horizon_steps: g.horizon_steps,
+            grid_side: g.candidate_grid_side,
+            reach_m: self.agent.speed_limit_mps * g.horizon_steps as f64 * self.filter_dt_s(),
+            kernel: Gaussian2::new(g.entropy_kernel_cov_m2),
+            miss_probability: self.filter.miss_probability,
+            process_noise: twice(self.filter.process_noise_cov_m2),
+        }
+    }
+
+    /// The Kalman filter's parameters.
+    pub fn kalman_params(&self) -> KalmanParams {
+        KalmanParams {
+            dt_s: self.filter_dt_s(),
+            process_noise_diag: self.kalman.process_noise_diag,
+            initial_cov_diag: self.kalman.initial_cov_diag,
+            measurement_noise_cov_m2: self.measurement.noise_cov_m2,
+            workspace_enu: self.workspace_enu,
+        }
+    }
+
+    /// The motion models' parameters.
+    pub fn motion_params(&self) -> MotionParams {
+        MotionParams {
+            dt_s: self.filter_dt_s(),
+            history_len: self.filter.history_len,
+            cv_max_speed_mps: self.motion.cv_max_speed_mps,
+            dmmn_model: self.motion.dmmn_model.clone(),
+            onnxruntime_library: self.motion.onnxruntime_library.clone(),
+        }
+    }
+
+    /// The loop rates.
+    pub fn rates(&self) -> Rates {
+        Rates {
+            physics_hz: self.timing.physics_hz,
+            filter_hz: self.timing.filter_hz,
+            guidance_hz: self.timing.guidance_hz,
+        }
+    }
+
+    /// The daemon's failsafes.
+    pub fn failsafe(&self) -> Failsafe {
+        let d = &self.daemon;
+        Failsafe {
+            target_lost_after_s: d.target_lost_after_s,
+            // Validated at load to be one of eer, lawn, hold.
+            fallback: d.target_lost_fallback.parse().unwrap_or(LostFallback::Eer),
+            camera_timeout_s: d.camera_timeout_s,
+            guidance_budget_ms: d.guidance_budget_ms,
+        }
+    }
+
+    /// Everything the tracker is built from, for a guidance law, with or without the
+    /// daemon's failsafes.
+    pub fn tracker_params(&self, guidance: GuidanceKind, failsafe: bool) -> TrackerParams {
+        TrackerParams {
+            rates: self.rates(),
+            guidance,
+            filter: self.filter_params(),
+            kalman: self.kalman_params(),
+            motion: self.motion_params(),
+            eer: self.eer_params(),
+            lawn: self.guidance.lawn.clone(),
+            failsafe: failsafe.then(|| self.failsafe()),
+        }
+    }
+}
+
+/// N(0, 2Q): the paper's code adds twice the process noise after each prediction.
+fn twice(q: [[f64; 2]; 2]) -> Gaussian2 {
+    Gaussian2::new([
+        [2.0 * q[0][0], 2.0 * q[0][1]],
+        [2.0 * q[1][0], 2.0 * q[1][1]],
+    ])
+}

@@ -1,0 +1,456 @@
+//! The one tracker loop: the multi-rate tick that the simulator (`infotrack sim`, analytic
+//! and `--vision`), the closed loop (`sim --closed-loop`), the daemon (`infotrack run`) and
+//! `infotrack replay` all run.
+//!
+//! At each physics tick the caller says what it knows ([`TickInput`]: the vehicle's
+//! position, whether its link is alive, the truth where a simulator has it) and lends a
+//! [`Sensor`]; the tracker decides what is due ([`Schedule`]), asks the sensor for an
+//! observation at a filter step, steps the estimator, keeps the tracking state (seen, lost,
+//! camera lost, link lost) and, at a guidance step, decides what the vehicle should do. It
+//! returns what happened ([`TickOutput`]); where its commands go and where its inputs come
+//! from is the caller's business. Pure and synchronous: no I/O, no clock of its own (one is
+//! passed in to time the work), every random draw from the generators it was given.
+
+pub mod clock;
+pub mod estimator;
+pub mod ports;
+pub mod schedule;
+
+pub use clock::{Clock, FrozenClock, MonotonicClock};
+pub use estimator::{Estimator, EstimatorKind, UnknownEstimator};
+pub use ports::{
+    Command, Decision, Observation, Prior, Sensor, StepOutcome, TickInput, TickOutput, TrackState,
+};
+pub use schedule::{Due, Rates, Schedule};
+
+use crate::estimation::{FilterError, FilterParams, KalmanFilter, KalmanParams, ParticleFilter};
+use crate::frames::Enu2;
+use crate::guidance::{EerParams, EerPlanner, GuidanceKind, LawnConfig, LawnmowerPath};
+use crate::metrics::StepRecord;
+use crate::motion::{self, MotionError, MotionParams};
+use crate::rng::CoreRng;
+use crate::world::World;
+
+/// What to do while the target is lost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LostFallback {
+    /// Keep the guidance law (EER searches by itself).
+    Eer,
+    /// Sweep the lawnmower path.
+    Lawn,
+    /// Stay where the vehicle is.
+    Hold,
+}
+
+/// A fallback name that names none.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}` (expected eer, lawn or hold)")]
+pub struct UnknownFallback(pub String);
+
+impl std::str::FromStr for LostFallback {
+    type Err = UnknownFallback;
+    fn from_str(s: &str) -> Result<Self, UnknownFallback> {
+        match s {
+            "eer" => Ok(Self::Eer),
+            "lawn" => Ok(Self::Lawn),
+            "hold" => Ok(Self::Hold),
+            other => Err(UnknownFallback(other.to_string())),
+        }
+    }
+}
+
+/// The failsafes of a vehicle in flight (the daemon's; the simulator flies without them:
+/// its sensor never fails and a failure is an error).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Failsafe {
+    /// The target counts as lost after this long without a measurement, s.
+    pub target_lost_after_s: f64,
+    /// What to fly while it is lost.
+    pub fallback: LostFallback,
+    /// No frame for this long: hold, s.
+    pub camera_timeout_s: f64,
+    /// A decision that takes longer than this (caller's clock) is not applied, ms.
+    pub guidance_budget_ms: f64,
+}
+
+/// Everything the tracker is built from: each component's own parameters.
+#[derive(Debug, Clone)]
+pub struct TrackerParams {
+    /// Loop rates.
+    pub rates: Rates,
+    /// The guidance law.
+    pub guidance: GuidanceKind,
+    /// The particle filter.
+    pub filter: FilterParams,
+    /// The Kalman filter (the `kf` estimator and `kf` guidance).
+    pub kalman: KalmanParams,
+    /// The motion models.
+    pub motion: MotionParams,
+    /// EER.
+    pub eer: EerParams,
+    /// The lawnmower sweep (`lawn` guidance and the `lawn` fallback).
+    pub lawn: LawnConfig,
+    /// Failsafes; `None`: none, and any failure is an error.
+    pub failsafe: Option<Failsafe>,
+}
+
+/// Why the tracker could not be built or could not go on.
+#[derive(Debug, thiserror::Error)]
+pub enum TrackerError {
+    /// The guidance law and the estimator do not fit together.
+    #[error("guidance `{guidance}` cannot run with motion `{motion}`: {reason}")]
+    Incompatible {
+        /// The guidance law.
+        guidance: GuidanceKind,
+        /// The motion model / estimator.
+        motion: String,
+        /// Why.
+        reason: String,
+    },
+    /// The motion model could not be built or failed.
+    #[error(transparent)]
+    Motion(#[from] MotionError),
+    /// The filter failed.
+    #[error(transparent)]
+    Filter(#[from] FilterError),
+    /// `truth` guidance without the truth.
+    #[error("guidance `truth` needs the true target position, which only a simulator has")]
+    NoTruth,
+}
+
+/// Why a tick failed: the sensor, or the tracker.
+#[derive(Debug, thiserror::Error)]
+pub enum TickError<E> {
+    /// The sensor.
+    #[error("sensor: {0}")]
+    Sensor(E),
+    /// The tracker.
+    #[error(transparent)]
+    Tracker(#[from] TrackerError),
+}
+
+/// Checks that a guidance law can run with an estimator.
+pub fn check_combination(g: GuidanceKind, e: &EstimatorKind) -> Result<(), TrackerError> {
+    if g.needs_particles() && *e == EstimatorKind::Kalman {
+        return Err(TrackerError::Incompatible {
+            guidance: g,
+            motion: e.name().to_string(),
+            reason: format!("{g} needs a particle set and `--motion kf` has none"),
+        });
+    }
+    Ok(())
+}
+
+/// The tracker's state between ticks.
+pub struct Tracker {
+    params: TrackerParams,
+    world: World,
+    schedule: Schedule,
+    estimator: Estimator,
+    /// KF guidance always has a Kalman filter beside the estimator for its goal.
+    side_kf: Option<KalmanFilter>,
+    planner: EerPlanner,
+    lawn: LawnmowerPath,
+    rng_filter: CoreRng,
+    rng_guidance: CoreRng,
+    state: TrackState,
+    last_measurement: Option<(f64, Enu2)>,
+    last_seen_s: f64,
+    last_frame_s: f64,
+    command: Option<Command>,
+    entropy: f64,
+    last_eer: f64,
+}
+
+impl Tracker {
+    /// Builds the estimator (drawing the initial particles from `rng_filter`) and the
+    /// guidance; `rng_guidance` feeds EER's sampling.
+    pub fn new(
+        params: TrackerParams,
+        world: World,
+        estimator: &EstimatorKind,
+        mut rng_filter: CoreRng,
+        rng_guidance: CoreRng,
+    ) -> Result<Self, TrackerError> {
+        check_combination(params.guidance, estimator)?;
+        let built = match estimator {
+            EstimatorKind::Particle(name) => Estimator::Particle {
+                pf: Box::new(ParticleFilter::new(
+                    params.filter.clone(),
+                    world.workspace_enu,
+                    &mut rng_filter,
+                )),
+                model: motion::build(name, &params.motion)?,
+            },
+            EstimatorKind::Kalman => {
+                Estimator::Kalman(Box::new(KalmanFilter::new(params.kalman.clone())))
+            }
+        };
+        let side_kf = (params.guidance == GuidanceKind::Kf && *estimator != EstimatorKind::Kalman)
+            .then(|| KalmanFilter::new(params.kalman.clone()));
+        Ok(Self {
+            schedule: Schedule::new(params.rates),
+            planner: EerPlanner::new(params.eer.clone()),
+            lawn: LawnmowerPath::new(&params.lawn),
+            params,
+            world,
+            estimator: built,
+            side_kf,
+            rng_filter,
+            rng_guidance,
+            state: TrackState::Tracking,
+            last_measurement: None,
+            last_seen_s: 0.0,
+            last_frame_s: 0.0,
+            command: None,
+            entropy: f64::NAN,
+            last_eer: f64::NAN,
+        })
+    }
+
+    /// The world it tracks in.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The estimator.
+    pub fn estimator(&self) -> &Estimator {
+        &self.estimator
+    }
+
+    /// The filter's current belief.
+    pub fn prior(&self) -> Prior {
+        Prior {
+            mean_enu: self.estimator.mean(),
+            cov_m2: self.estimator.covariance(),
+        }
+    }
+
+    /// The command in force.
+    pub fn command(&self) -> Option<Command> {
+        self.command
+    }
+
+    /// The tracking state.
+    pub fn state(&self) -> TrackState {
+        self.state
+    }
+
+    /// One physics tick: a filter step and a guidance decision when due.
+    pub fn tick<S: Sensor>(
+        &mut self,
+        input: &TickInput,
+        sensor: &mut S,
+        clock: &dyn Clock,
+    ) -> Result<TickOutput, TickError<S::Error>> {
+        let Some(vehicle_enu) = input.vehicle_enu else {
+            // Nothing to act from yet: time passes, what is due stays due.
+            return Ok(TickOutput {
+                t_s: self.schedule.skip(),
+                ..TickOutput::default()
+            });
+        };
+        let due = self.schedule.advance();
+        let mut out = TickOutput {
+            t_s: due.t_s,
+            ..TickOutput::default()
+        };
+        if due.filter {
+            let observation = sensor
+                .observe(due.t_s, &vehicle_enu, &self.prior())
+                .map_err(TickError::Sensor)?;
+            out.step = Some(self.update(due.t_s, observation, input, clock)?);
+        }
+        if due.guidance {
+            out.decision = self.decide(due.t_s, &vehicle_enu, input.truth_enu, clock)?;
+        }
+        Ok(out)
+    }
+
+    /// One filter step with an observation, at `t_s`. Public for `infotrack replay`, which
+    /// feeds a flight's recorded observations in their order.
+    pub fn update(
+        &mut self,
+        t_s: f64,
+        observation: Observation,
+        input: &TickInput,
+        clock: &dyn Clock,
+    ) -> Result<StepOutcome, TrackerError> {
+        let vehicle_enu = input.vehicle_enu.unwrap_or(Enu2::new(f64::NAN, f64::NAN));
+        let (taken_from, z, frame) = match observation {
+            Observation::Frame { taken_from_enu, z } => (taken_from_enu, z, true),
+            Observation::NoFrame => (vehicle_enu, None, false),
+        };
+        if frame {
+            self.last_frame_s = t_s;
+        }
+        if let Some(z) = z {
+            self.last_measurement = Some((t_s, z));
+        }
+        let started = clock.now_s();
+        let stepped = if frame {
+            self.estimator
+                .step(z, &taken_from, &self.world, &mut self.rng_filter)
+        } else {
+            self.estimator.step_blind(&mut self.rng_filter)
+        };
+        let update_ms = (clock.now_s() - started) * 1e3;
+        let (n_eff, filter_error) = match stepped {
+            Ok(n) => (n, None),
+            Err(e) if self.params.failsafe.is_some() => (f64::NAN, Some(e.to_string())),
+            Err(e) => return Err(e.into()),
+        };
+        if let Some(kf) = self.side_kf.as_mut() {
+            kf.step(z);
+        }
+        if z.is_some() {
+            self.last_seen_s = t_s;
+        }
+        let before = self.state;
+        self.state = self.next_state(t_s, input.link_lost);
+        let truth = input.truth_enu.unwrap_or(Enu2::new(f64::NAN, f64::NAN));
+        let record = StepRecord {
+            t_s,
+            target_enu: truth,
+            agent_enu: taken_from,
+            waypoint_enu: match self.command {
+                Some(Command::GoTo(w)) => w,
+                _ => taken_from,
+            },
+            measurement_enu: z,
+            estimate_enu: self.estimator.mean(),
+            cov_m2: self.estimator.covariance(),
+            n_eff,
+            eer: self.last_eer,
+            target_occluded: self.world.is_occluded(&truth),
+            target_in_footprint: self.world.footprint.contains(&taken_from, &truth),
+        };
+        Ok(StepOutcome {
+            record,
+            state: self.state,
+            frame,
+            command: self.command,
+            entropy: self.entropy,
+            update_ms,
+            filter_error,
+            camera_lost_now: self.state == TrackState::CameraLost
+                && before != TrackState::CameraLost,
+        })
+    }
+
+    fn next_state(&self, t_s: f64, link_lost: bool) -> TrackState {
+        let Some(f) = self.params.failsafe else {
+            return TrackState::Tracking;
+        };
+        if link_lost {
+            TrackState::LinkLost
+        } else if t_s - self.last_frame_s > f.camera_timeout_s {
+            TrackState::CameraLost
+        } else if t_s - self.last_seen_s > f.target_lost_after_s {
+            TrackState::Lost
+        } else {
+            TrackState::Tracking
+        }
+    }
+
+    /// One guidance decision at `t_s` for a vehicle at `vehicle_enu`. `None`: no decision
+    /// is taken on a stale vehicle state (link lost). Public for `infotrack replay`.
+    pub fn decide(
+        &mut self,
+        t_s: f64,
+        vehicle_enu: &Enu2,
+        truth_enu: Option<Enu2>,
+        clock: &dyn Clock,
+    ) -> Result<Option<Decision>, TrackerError> {
+        if self.state == TrackState::LinkLost {
+            return Ok(None);
+        }
+        let started = clock.now_s();
+        let decided = self.choose(t_s, vehicle_enu, truth_enu);
+        let compute_ms = (clock.now_s() - started) * 1e3;
+        let failsafe = self.params.failsafe;
+        let over_budget = failsafe.is_some_and(|f| compute_ms > f.guidance_budget_ms);
+        let command = match decided {
+            Ok(c) => c,
+            Err(e) if failsafe.is_some() => {
+                return Ok(Some(Decision::Failed {
+                    reason: e.to_string(),
+                    compute_ms,
+                    over_budget,
+                }))
+            }
+            Err(e) => return Err(e),
+        };
+        if over_budget {
+            return Ok(Some(Decision::Overrun { compute_ms }));
+        }
+        let command = match command {
+            Command::GoTo(w) => Command::GoTo(self.world.workspace_enu.clamp(&w)),
+            hold => hold,
+        };
+        self.command = Some(command);
+        Ok(Some(Decision::Command {
+            command,
+            compute_ms,
+        }))
+    }
+
+    /// What the guidance law (or the failsafe in force) says, before the geofence.
+    fn choose(
+        &mut self,
+        t_s: f64,
+        vehicle_enu: &Enu2,
+        truth_enu: Option<Enu2>,
+    ) -> Result<Command, TrackerError> {
+        if let Some(f) = self.params.failsafe {
+            match (self.state, f.fallback) {
+                (TrackState::CameraLost, _) | (TrackState::Lost, LostFallback::Hold) => {
+                    return Ok(Command::HoldHere)
+                }
+                (TrackState::Lost, LostFallback::Lawn) => {
+                    return Ok(Command::GoTo(self.lawn.next_point()))
+                }
+                _ => {}
+            }
+        }
+        let goal = match self.params.guidance {
+            GuidanceKind::Eer => self.plan_eer(vehicle_enu)?,
+            GuidanceKind::Pfwm => self.estimator.mean(),
+            GuidanceKind::Kf => self
+                .side_kf
+                .as_ref()
+                .map(|k| k.mean())
+                .unwrap_or_else(|| self.estimator.mean()),
+            GuidanceKind::Truth => truth_enu.ok_or(TrackerError::NoTruth)?,
+            GuidanceKind::Lawn => match self.last_measurement {
+                Some((tm, z)) if t_s - tm <= self.params.lawn.track_measurement_for_s => z,
+                _ => self.lawn.next_point(),
+            },
+        };
+        Ok(Command::GoTo(goal))
+    }
+
+    fn plan_eer(&mut self, vehicle_enu: &Enu2) -> Result<Enu2, TrackerError> {
+        let Estimator::Particle { pf, model } = &mut self.estimator else {
+            // Refused at construction by check_combination.
+            return Err(TrackerError::Incompatible {
+                guidance: GuidanceKind::Eer,
+                motion: "kf".into(),
+                reason: "eer needs a particle set".into(),
+            });
+        };
+        let d = self.planner.plan(
+            pf,
+            model.as_mut(),
+            vehicle_enu,
+            &self.world,
+            &mut self.rng_guidance,
+        )?;
+        self.entropy = d.h_now;
+        self.last_eer = d.eer;
+        Ok(d.waypoint_enu)
+    }
+}
+
+#[cfg(test)]
+mod tests;

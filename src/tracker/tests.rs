@@ -1,0 +1,196 @@
+use super::*;
+use crate::config::Config;
+use crate::rng::{stream_rng, Stream};
+
+/// A sensor that sees the target wherever it is told it is, always from where the vehicle
+/// is (or delivers no frame while frozen).
+struct Scripted {
+    z: Option<Enu2>,
+    frozen: bool,
+    calls: usize,
+}
+
+impl Sensor for Scripted {
+    type Error = std::convert::Infallible;
+    fn observe(&mut self, _t: f64, v: &Enu2, _p: &Prior) -> Result<Observation, Self::Error> {
+        self.calls += 1;
+        Ok(if self.frozen {
+            Observation::NoFrame
+        } else {
+            Observation::Frame {
+                taken_from_enu: *v,
+                z: self.z,
+            }
+        })
+    }
+}
+
+fn tracker(c: &Config, guidance: GuidanceKind, failsafe: bool) -> Tracker {
+    Tracker::new(
+        c.tracker_params(guidance, failsafe),
+        c.world(),
+        &EstimatorKind::parse("cv").unwrap(),
+        stream_rng(1, 0, Stream::Filter, 0),
+        stream_rng(1, 0, Stream::Guidance, 0),
+    )
+    .unwrap()
+}
+
+fn input(v: Enu2) -> TickInput {
+    TickInput {
+        vehicle_enu: Some(v),
+        link_lost: false,
+        truth_enu: Some(Enu2::new(0.5, 0.5)),
+    }
+}
+
+#[test]
+fn one_second_of_lab_ticks_gives_three_steps_and_one_decision_inside_the_fence() {
+    let c = Config::default_lab();
+    let mut t = tracker(&c, GuidanceKind::Pfwm, false);
+    let mut s = Scripted {
+        z: Some(Enu2::new(0.5, 0.5)),
+        frozen: false,
+        calls: 0,
+    };
+    let ticks = c.timing.physics_hz as usize;
+    let mut steps = 0;
+    let mut decisions = Vec::new();
+    for _ in 0..ticks {
+        let out = t.tick(&input(Enu2::zeros()), &mut s, &FrozenClock).unwrap();
+        steps += out.step.is_some() as usize;
+        decisions.extend(out.decision);
+    }
+    assert_eq!(steps, c.timing.filter_hz as usize);
+    assert_eq!(s.calls, steps);
+    assert_eq!(decisions.len(), c.timing.guidance_hz as usize);
+    let Decision::Command {
+        command: Command::GoTo(w),
+        ..
+    } = decisions[0]
+    else {
+        panic!("{:?}", decisions[0])
+    };
+    assert!(c.workspace_enu.contains(&w));
+    // PFWM flies to the estimate, which the measurements pulled toward (0.5, 0.5).
+    assert!((w - Enu2::new(0.5, 0.5)).norm() < 0.3, "{w}");
+}
+
+#[test]
+fn no_vehicle_position_means_no_step_until_one_arrives_then_catch_up() {
+    let c = Config::default_lab();
+    let mut t = tracker(&c, GuidanceKind::Pfwm, false);
+    let mut s = Scripted {
+        z: None,
+        frozen: false,
+        calls: 0,
+    };
+    let none = TickInput {
+        vehicle_enu: None,
+        ..input(Enu2::zeros())
+    };
+    for _ in 0..50 {
+        let out = t.tick(&none, &mut s, &FrozenClock).unwrap();
+        assert!(out.step.is_none() && out.decision.is_none());
+    }
+    assert_eq!(s.calls, 0);
+    let out = t.tick(&input(Enu2::zeros()), &mut s, &FrozenClock).unwrap();
+    assert!(out.step.is_some() && out.decision.is_some());
+}
+
+#[test]
+fn failsafes_lose_the_target_then_the_camera_then_hold() {
+    let mut c = Config::default_lab();
+    c.daemon.target_lost_fallback = "hold".into();
+    let mut t = tracker(&c, GuidanceKind::Eer, true);
+    let mut s = Scripted {
+        z: None,
+        frozen: false,
+        calls: 0,
+    };
+    let mut states = Vec::new();
+    let mut last = None;
+    let n = (c.timing.physics_hz * (c.daemon.target_lost_after_s + 1.0)) as usize;
+    for _ in 0..n {
+        let out = t.tick(&input(Enu2::zeros()), &mut s, &FrozenClock).unwrap();
+        if let Some(st) = out.step {
+            states.push(st.state);
+        }
+        if let Some(d) = out.decision {
+            last = Some(d);
+        }
+    }
+    assert_eq!(states[0], TrackState::Tracking);
+    assert_eq!(*states.last().unwrap(), TrackState::Lost);
+    assert!(matches!(
+        last,
+        Some(Decision::Command {
+            command: Command::HoldHere,
+            ..
+        })
+    ));
+    // Frozen camera: camera-lost once the timeout passes, reported once.
+    s.frozen = true;
+    let mut lost_now = 0;
+    for _ in 0..(c.timing.physics_hz * (c.daemon.camera_timeout_s + 1.0)) as usize {
+        let out = t.tick(&input(Enu2::zeros()), &mut s, &FrozenClock).unwrap();
+        if let Some(st) = out.step {
+            assert!(!st.frame);
+            lost_now += st.camera_lost_now as usize;
+        }
+    }
+    assert_eq!(t.state(), TrackState::CameraLost);
+    assert_eq!(lost_now, 1);
+    // Link lost: from the filter step that sees it (the state changes at filter steps), no
+    // decision at all.
+    let lost_link = TickInput {
+        link_lost: true,
+        ..input(Enu2::zeros())
+    };
+    let mut seen_lost = false;
+    let mut decisions_after = 0;
+    for _ in 0..(2.0 * c.timing.physics_hz) as usize {
+        let out = t.tick(&lost_link, &mut s, &FrozenClock).unwrap();
+        if seen_lost {
+            decisions_after += out.decision.is_some() as usize;
+        }
+        seen_lost |= out.step.is_some_and(|st| st.state == TrackState::LinkLost);
+    }
+    assert!(seen_lost);
+    assert_eq!(decisions_after, 0);
+}
+
+#[test]
+fn truth_guidance_without_truth_is_an_error_not_a_guess() {
+    let c = Config::default_lab();
+    let mut t = tracker(&c, GuidanceKind::Truth, false);
+    let mut s = Scripted {
+        z: None,
+        frozen: false,
+        calls: 0,
+    };
+    let blind = TickInput {
+        truth_enu: None,
+        ..input(Enu2::zeros())
+    };
+    let err = (0..100)
+        .find_map(|_| t.tick(&blind, &mut s, &FrozenClock).err())
+        .expect("a decision falls due within 100 ticks");
+    assert!(err.to_string().contains("truth"), "{err}");
+}
+
+#[test]
+fn eer_with_a_kalman_estimator_is_refused_with_a_reason() {
+    let c = Config::default_lab();
+    let err = Tracker::new(
+        c.tracker_params(GuidanceKind::Eer, false),
+        c.world(),
+        &EstimatorKind::Kalman,
+        stream_rng(1, 0, Stream::Filter, 0),
+        stream_rng(1, 0, Stream::Guidance, 0),
+    )
+    .err()
+    .unwrap();
+    let msg = err.to_string();
+    assert!(msg.contains("eer") && msg.contains("particle"), "{msg}");
+}
