@@ -140,6 +140,125 @@ impl LinkConfig {
     }
 }
 
+type SharedTlog = Option<Arc<super::tlog::Tlog>>;
+type SharedState = Arc<Mutex<VehicleState>>;
+
+/// The reader: every message into the tlog and the vehicle state; a dead stream reopened.
+fn spawn_reader(
+    conn: Arc<Connection>,
+    tlog: SharedTlog,
+    state: SharedState,
+    events: broadcast::Sender<LinkEvent>,
+    me: (u8, u8),
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        loop {
+            match conn.recv().await {
+                Ok((h, m)) => {
+                    if let Some(t) = &tlog {
+                        t.record(&h, &m);
+                    }
+                    on_message(&state, &events, me, &h, &m)
+                }
+                Err(e) if conn.reopens() && is_dead_stream(&e) => {
+                    tracing::error!("link: {e}: the connection is gone; reopening");
+                    conn.reopen(|| false).await;
+                }
+                Err(e) => {
+                    tracing::debug!("link: receive error: {e}");
+                    tokio::time::sleep(Duration::from_millis(5)).await;
+                }
+            }
+        }
+    })
+}
+
+/// Our heartbeat, once a second (unless paused by a test of the vehicle's failsafe).
+fn spawn_heartbeat(
+    conn: Arc<Connection>,
+    tlog: SharedTlog,
+    paused: Arc<AtomicBool>,
+    header: MavHeader,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let mut t = tokio::time::interval(Duration::from_secs(1));
+        loop {
+            t.tick().await;
+            if paused.load(Ordering::Relaxed) {
+                continue;
+            }
+            let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            });
+            if let Some(t) = &tlog {
+                t.record(&header, &hb);
+            }
+            let _ = conn.send(&header, &hb).await;
+        }
+    })
+}
+
+/// Declares the vehicle lost when its heartbeat is older than `timeout`.
+fn spawn_watchdog(
+    state: SharedState,
+    events: broadcast::Sender<LinkEvent>,
+    timeout: Duration,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let mut t = tokio::time::interval(Duration::from_millis(100));
+        loop {
+            t.tick().await;
+            let mut s = state.lock().expect("state poisoned");
+            let stale = s.last_heartbeat.is_some_and(|h| h.elapsed() > timeout);
+            if stale && !s.lost {
+                s.lost = true;
+                tracing::warn!("vehicle lost: no heartbeat for {timeout:?}");
+                let _ = events.send(LinkEvent::VehicleLost);
+            }
+        }
+    })
+}
+
+/// The setpoint stream: the current target every `period`, unless paused.
+fn spawn_streamer(
+    conn: Arc<Connection>,
+    tlog: SharedTlog,
+    streamer: Arc<Streamer>,
+    state: SharedState,
+    header: MavHeader,
+    period: Duration,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let mut t = tokio::time::interval(period);
+        t.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        let start = Instant::now();
+        loop {
+            t.tick().await;
+            if streamer.paused.load(Ordering::Relaxed) {
+                continue;
+            }
+            let Some((p, yaw)) = *streamer.target_ned.lock().expect("streamer poisoned") else {
+                continue;
+            };
+            let target = state
+                .lock()
+                .expect("state poisoned")
+                .address
+                .unwrap_or((1, 1));
+            let m = position_target(target, p, yaw, start.elapsed().as_millis() as u32);
+            if let Some(t) = &tlog {
+                t.record(&header, &m);
+            }
+            let _ = conn.send(&header, &m).await;
+        }
+    })
+}
+
 /// A MAVLink connection URL that is not one, and why.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error("{0}")]
@@ -324,109 +443,26 @@ impl VehicleLink {
             paused: AtomicBool::new(false),
         });
 
-        let reader = {
-            let conn = conn.clone();
-            let tlog = tlog.clone();
-            let state = state.clone();
-            let events = events.clone();
-            let me = (cfg.system_id, cfg.component_id);
-            tokio::spawn(async move {
-                loop {
-                    match conn.recv().await {
-                        Ok((h, m)) => {
-                            if let Some(t) = &tlog {
-                                t.record(&h, &m);
-                            }
-                            on_message(&state, &events, me, &h, &m)
-                        }
-                        Err(e) if conn.reopens() && is_dead_stream(&e) => {
-                            tracing::error!("link: {e}: the connection is gone; reopening");
-                            conn.reopen(|| false).await;
-                        }
-                        Err(e) => {
-                            tracing::debug!("link: receive error: {e}");
-                            tokio::time::sleep(Duration::from_millis(5)).await;
-                        }
-                    }
-                }
-            })
-        };
-        let heartbeat = {
-            let conn = conn.clone();
-            let tlog = tlog.clone();
-            let paused = heartbeat_paused.clone();
-            tokio::spawn(async move {
-                let mut t = tokio::time::interval(Duration::from_secs(1));
-                loop {
-                    t.tick().await;
-                    if paused.load(Ordering::Relaxed) {
-                        continue;
-                    }
-                    let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                        custom_mode: 0,
-                        mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
-                        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
-                        base_mode: MavModeFlag::empty(),
-                        system_status: MavState::MAV_STATE_ACTIVE,
-                        mavlink_version: 3,
-                    });
-                    if let Some(t) = &tlog {
-                        t.record(&header, &hb);
-                    }
-                    let _ = conn.send(&header, &hb).await;
-                }
-            })
-        };
-        let watchdog = {
-            let state = state.clone();
-            let events = events.clone();
-            let timeout = cfg.heartbeat_timeout;
-            tokio::spawn(async move {
-                let mut t = tokio::time::interval(Duration::from_millis(100));
-                loop {
-                    t.tick().await;
-                    let mut s = state.lock().expect("state poisoned");
-                    let stale = s.last_heartbeat.is_some_and(|h| h.elapsed() > timeout);
-                    if stale && !s.lost {
-                        s.lost = true;
-                        tracing::warn!("vehicle lost: no heartbeat for {timeout:?}");
-                        let _ = events.send(LinkEvent::VehicleLost);
-                    }
-                }
-            })
-        };
-        let stream = {
-            let conn = conn.clone();
-            let tlog = tlog.clone();
-            let streamer = streamer.clone();
-            let state = state.clone();
-            let period = Duration::from_secs_f64(1.0 / cfg.setpoint_hz.max(1.0));
-            tokio::spawn(async move {
-                let mut t = tokio::time::interval(period);
-                t.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-                let start = Instant::now();
-                loop {
-                    t.tick().await;
-                    if streamer.paused.load(Ordering::Relaxed) {
-                        continue;
-                    }
-                    let Some((p, yaw)) = *streamer.target_ned.lock().expect("streamer poisoned")
-                    else {
-                        continue;
-                    };
-                    let target = state
-                        .lock()
-                        .expect("state poisoned")
-                        .address
-                        .unwrap_or((1, 1));
-                    let m = position_target(target, p, yaw, start.elapsed().as_millis() as u32);
-                    if let Some(t) = &tlog {
-                        t.record(&header, &m);
-                    }
-                    let _ = conn.send(&header, &m).await;
-                }
-            })
-        };
+        let me = (cfg.system_id, cfg.component_id);
+        let reader = spawn_reader(
+            conn.clone(),
+            tlog.clone(),
+            state.clone(),
+            events.clone(),
+            me,
+        );
+        let heartbeat =
+            spawn_heartbeat(conn.clone(), tlog.clone(), heartbeat_paused.clone(), header);
+        let watchdog = spawn_watchdog(state.clone(), events.clone(), cfg.heartbeat_timeout);
+        let period = Duration::from_secs_f64(1.0 / cfg.setpoint_hz.max(1.0));
+        let stream = spawn_streamer(
+            conn.clone(),
+            tlog.clone(),
+            streamer.clone(),
+            state.clone(),
+            header,
+            period,
+        );
         Ok(Self {
             cfg,
             conn,
@@ -824,6 +860,8 @@ fn boot_clock(s: &mut VehicleState, events: &broadcast::Sender<LinkEvent>, t_ms:
     s.time_boot_ms = Some(s.time_boot_ms.map_or(t_ms, |l| l.max(t_ms)));
 }
 
+// Long because it is one dispatch over the MAVLink messages the link reads, one short arm
+// each, so what updates the vehicle state is in one place.
 fn on_message(
     state: &Mutex<VehicleState>,
     events: &broadcast::Sender<LinkEvent>,

@@ -185,6 +185,8 @@ pub fn read(path: &Path) -> Result<Vec<FileParam>, ParamFileError> {
 }
 
 /// Parses parameter-file text; `origin` names the file in errors.
+// Slightly long: one line-by-line parser for both file formats, each rule with its own
+// error naming the line.
 pub fn parse(
     text: &str,
     format: ParamFormat,

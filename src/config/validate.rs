@@ -269,6 +269,8 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     Ok(())
 }
 
+// Long because each road-graph rule (ids, edges, probabilities, reachability) is checked
+// in order with its own message naming the key.
 fn validate_road(c: &Config) -> Result<(), ConfigError> {
     let ws = &c.workspace_enu;
     let road = &c.road;

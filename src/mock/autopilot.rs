@@ -385,6 +385,8 @@ impl MockAutopilot {
         })
     }
 
+    // Long because it is one dispatch over the COMMAND_LONG ids the firmware answers, one
+    // short arm each, kept together so the table of supported commands reads at a glance.
     fn command(&mut self, from: &MavHeader, c: &COMMAND_LONG_DATA) -> Vec<MavMessage> {
         use MavResult::*;
         let mut out = Vec::new();

@@ -162,6 +162,8 @@ pub async fn spawn(url: &str, cfg: MockConfig, faults: Faults) -> std::io::Resul
 }
 
 /// Starts a mock autopilot at `url` with the given transport options.
+// Long (~100 lines) because it wires the transport, the fault shell and the vehicle's
+// tick loop together in one place; each part is a short closure that reads in order.
 pub async fn spawn_with(
     url: &str,
     cfg: MockConfig,

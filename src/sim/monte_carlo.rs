@@ -140,18 +140,7 @@ impl MonteCarlo {
         let jobs: Vec<(usize, u64)> = (0..combos.len())
             .flat_map(|c| (0..self.runs).map(move |r| (c, r)))
             .collect();
-        let bar = if self.progress {
-            let b = ProgressBar::new(jobs.len() as u64);
-            b.set_style(
-                ProgressStyle::with_template(
-                    "{bar:40} {pos}/{len} runs {elapsed_precise} eta {eta}",
-                )
-                .expect("static template"),
-            );
-            b
-        } else {
-            ProgressBar::hidden()
-        };
+        let bar = progress_bar(self.progress, jobs.len());
         let snapshot_times: Vec<f64> = [1.0 / 6.0, 0.5, 5.0 / 6.0]
             .iter()
             .map(|f| f * self.duration_s)
@@ -185,27 +174,7 @@ impl MonteCarlo {
             .zip(&by_combo)
             .map(|((g, e), outs)| aggregate(*g, e, outs))
             .collect();
-        // Welch tests of EER against every other law with the same estimator.
-        let eer_runs: BTreeMap<String, Vec<RunSummary>> = results
-            .iter()
-            .filter(|r| r.guidance == "eer")
-            .map(|r| (r.motion.clone(), r.per_run.clone()))
-            .collect();
-        for r in results.iter_mut().filter(|r| r.guidance != "eer") {
-            if let Some(eer) = eer_runs.get(&r.motion) {
-                let t = |f: fn(&RunSummary) -> f64| {
-                    let a: Vec<f64> = eer.iter().map(f).collect();
-                    let b: Vec<f64> = r.per_run.iter().map(f).collect();
-                    welch_t_test(&a, &b)
-                };
-                r.welch_vs_eer = Some(VersusEer {
-                    tracking_error_m: t(|s| s.tracking_error_m),
-                    estimation_error_m: t(|s| s.estimation_error_m),
-                    cov_det: t(|s| s.cov_det),
-                    fov_percent: t(|s| s.fov_percent),
-                });
-            }
-        }
+        add_welch_tests(&mut results);
         let mut outputs_map = BTreeMap::new();
         if self.keep_outputs {
             for ((g, e), outs) in combos.iter().zip(by_combo) {
@@ -265,5 +234,43 @@ fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput]) -> ComboRes
                 })
             }),
         per_run,
+    }
+}
+
+/// A progress bar over `jobs` runs, or a hidden one.
+fn progress_bar(shown: bool, jobs: usize) -> ProgressBar {
+    if !shown {
+        return ProgressBar::hidden();
+    }
+    let b = ProgressBar::new(jobs as u64);
+    if let Ok(style) =
+        ProgressStyle::with_template("{bar:40} {pos}/{len} runs {elapsed_precise} eta {eta}")
+    {
+        b.set_style(style);
+    }
+    b
+}
+
+/// Welch tests of EER against every other law with the same estimator.
+fn add_welch_tests(results: &mut [ComboResult]) {
+    let eer_runs: BTreeMap<String, Vec<RunSummary>> = results
+        .iter()
+        .filter(|r| r.guidance == "eer")
+        .map(|r| (r.motion.clone(), r.per_run.clone()))
+        .collect();
+    for r in results.iter_mut().filter(|r| r.guidance != "eer") {
+        if let Some(eer) = eer_runs.get(&r.motion) {
+            let t = |f: fn(&RunSummary) -> f64| {
+                let a: Vec<f64> = eer.iter().map(f).collect();
+                let b: Vec<f64> = r.per_run.iter().map(f).collect();
+                welch_t_test(&a, &b)
+            };
+            r.welch_vs_eer = Some(VersusEer {
+                tracking_error_m: t(|s| s.tracking_error_m),
+                estimation_error_m: t(|s| s.estimation_error_m),
+                cov_det: t(|s| s.cov_det),
+                fov_percent: t(|s| s.fov_percent),
+            });
+        }
     }
 }

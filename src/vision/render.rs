@@ -169,6 +169,8 @@ fn ray_sampler<'a>(
 }
 
 /// Renders the camera's view. `noise_seed` drives the sensor noise only.
+// Slightly long: the per-row parallel loop keeps its sampling, noise and blur steps in
+// one place so the pixel pipeline reads top to bottom.
 pub fn render(
     cam: &CameraModel,
     pose: &VehiclePoseNed,
@@ -273,6 +275,9 @@ const SMOOTH_BLOCK_M: f64 = 0.02;
 /// smooth at the block's scale and its corners are interpolated from the block's. The
 /// result differs from evaluating every corner by well under a grey level (tested), at a
 /// fraction of the cost when the camera is low.
+// Long because it is the renderer's hot kernel: the block classification, the exact
+// corners and the interpolated ones share local closures and buffers that would otherwise
+// be passed around per pixel.
 fn corner_radiance(
     cam: &CameraModel,
     pose: &VehiclePoseNed,
