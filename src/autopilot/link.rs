@@ -23,7 +23,7 @@ use super::modes::{Flavor, Mode};
 use super::params_file::{decode_wire, encode_wire, ParamType};
 use super::params_file::{mav_param_type_of, param_type_of};
 use super::signing::SigningKey;
-use crate::frames::{yaw_enu_to_ned, PositionEnu, PositionNed};
+use crate::frames::{yaw_enu_to_ned, Enu2, PositionEnu, PositionNed};
 use crate::world::geometry::BoundsEnu;
 
 /// Why a link operation failed.
@@ -88,6 +88,9 @@ pub enum LinkError {
         /// North, m.
         y: f64,
     },
+    /// A setpoint with a NaN or infinite coordinate was asked for (never sent).
+    #[error("setpoint with a non-finite position or velocity refused")]
+    NonFiniteSetpoint,
     /// Sending failed.
     #[error("MAVLink send failed: {0}")]
     Send(String),
@@ -242,15 +245,22 @@ fn spawn_streamer(
             if streamer.paused.load(Ordering::Relaxed) {
                 continue;
             }
-            let Some((p, yaw)) = *streamer.target_ned.lock().expect("streamer poisoned") else {
+            let Some(target_sp) = *streamer.target_ned.lock().expect("streamer poisoned") else {
                 continue;
             };
+            let (p, v) = target_sp.at(Instant::now(), streamer.geofence_enu.as_ref());
             let target = state
                 .lock()
                 .expect("state poisoned")
                 .address
                 .unwrap_or((1, 1));
-            let m = position_target(target, p, yaw, start.elapsed().as_millis() as u32);
+            let m = position_target(
+                target,
+                p,
+                v,
+                target_sp.yaw_ned,
+                start.elapsed().as_millis() as u32,
+            );
             if let Some(t) = &tlog {
                 t.record(&header, &m);
             }
@@ -380,8 +390,42 @@ pub struct VehicleState {
 }
 
 struct Streamer {
-    target_ned: Mutex<Option<(PositionNed, f32)>>,
+    target_ned: Mutex<Option<StreamedTarget>>,
     paused: AtomicBool,
+    /// Where a moving setpoint stops (world ENU).
+    geofence_enu: Option<BoundsEnu>,
+}
+
+/// The setpoint being streamed: a point moving at a constant velocity from `since` on.
+#[derive(Debug, Clone, Copy)]
+struct StreamedTarget {
+    position_ned: PositionNed,
+    /// m/s, local NED.
+    velocity_ned: [f64; 3],
+    yaw_ned: f32,
+    since: Instant,
+}
+
+impl StreamedTarget {
+    /// Position and velocity at `now`; a setpoint that would leave the geofence stops at
+    /// its edge with no velocity.
+    fn at(&self, now: Instant, fence: Option<&BoundsEnu>) -> (PositionNed, [f64; 3]) {
+        let dt = now.saturating_duration_since(self.since).as_secs_f64();
+        let v = self.velocity_ned;
+        let p = PositionNed {
+            x_north_m: self.position_ned.x_north_m + v[0] * dt,
+            y_east_m: self.position_ned.y_east_m + v[1] * dt,
+            z_down_m: self.position_ned.z_down_m + v[2] * dt,
+        };
+        match fence {
+            Some(f) if !f.contains(&p.to_enu().xy()) => {
+                let e = p.to_enu();
+                let c = f.clamp(&e.xy());
+                (PositionEnu::from_xy(&c, e.z_up_m).to_ned(), [0.0; 3])
+            }
+            _ => (p, v),
+        }
+    }
 }
 
 /// A running link to one vehicle.
@@ -440,6 +484,7 @@ impl VehicleLink {
         let heartbeat_paused = Arc::new(AtomicBool::new(false));
         let streamer = Arc::new(Streamer {
             target_ned: Mutex::new(None),
+            geofence_enu: cfg.geofence_enu,
             paused: AtomicBool::new(false),
         });
 
@@ -650,6 +695,19 @@ impl VehicleLink {
     /// Sets the position the streamer sends (world ENU, yaw ENU), refusing points outside the
     /// geofence. The stream starts with the first setpoint.
     pub fn set_setpoint(&self, p: PositionEnu, yaw_enu_rad: f64) -> Result<(), LinkError> {
+        self.set_moving_setpoint(p, Enu2::zeros(), yaw_enu_rad)
+    }
+
+    /// Streams a setpoint that starts at `p` now and moves at `velocity_enu` (m/s,
+    /// horizontal), sent as position + velocity (the velocity is the autopilot's
+    /// feed-forward); it stops at the geofence's edge. A zero velocity sends position-only
+    /// targets.
+    pub fn set_moving_setpoint(
+        &self,
+        p: PositionEnu,
+        velocity_enu: Enu2,
+        yaw_enu_rad: f64,
+    ) -> Result<(), LinkError> {
         if let Some(g) = &self.cfg.geofence_enu {
             if !g.contains(&p.xy()) {
                 return Err(LinkError::OutsideGeofence {
@@ -658,8 +716,16 @@ impl VehicleLink {
                 });
             }
         }
-        *self.streamer.target_ned.lock().expect("streamer poisoned") =
-            Some((p.to_ned(), yaw_enu_to_ned(yaw_enu_rad) as f32));
+        if !(velocity_enu.x.is_finite() && velocity_enu.y.is_finite()) {
+            return Err(LinkError::NonFiniteSetpoint);
+        }
+        let v = PositionEnu::from_xy(&velocity_enu, 0.0).to_ned();
+        *self.streamer.target_ned.lock().expect("streamer poisoned") = Some(StreamedTarget {
+            position_ned: p.to_ned(),
+            velocity_ned: [v.x_north_m, v.y_east_m, 0.0],
+            yaw_ned: yaw_enu_to_ned(yaw_enu_rad) as f32,
+            since: Instant::now(),
+        });
         Ok(())
     }
 
@@ -817,25 +883,33 @@ impl VehicleLink {
     }
 }
 
+/// A local NED target: position and yaw, plus the velocity as feed-forward when it is not
+/// zero. Masks: 2552 (position + yaw) and 2496 (position + velocity + yaw), which PX4's
+/// offboard mode and ArduPilot's GUIDED both accept (3576 and 3520 with yaw ignored).
 fn position_target(
     target: (u8, u8),
     p: PositionNed,
+    v_ned: [f64; 3],
     yaw_ned: f32,
     time_boot_ms: u32,
 ) -> MavMessage {
-    // Position and yaw given; velocity, acceleration and yaw rate ignored.
-    let mask = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
-        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
+    let mut mask = PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AX_IGNORE
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AY_IGNORE
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_AZ_IGNORE
         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE;
+    if v_ned == [0.0; 3] {
+        mask |= PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE;
+    }
     MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
         time_boot_ms,
         x: p.x_north_m as f32,
         y: p.y_east_m as f32,
         z: p.z_down_m as f32,
+        vx: v_ned[0] as f32,
+        vy: v_ned[1] as f32,
+        vz: v_ned[2] as f32,
         yaw: yaw_ned,
         type_mask: mask,
         target_system: target.0,
@@ -1009,7 +1083,7 @@ mod tests {
             z_up_m: 10.0,
         };
         let MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) =
-            position_target((1, 1), p.to_ned(), 0.0, 0)
+            position_target((1, 1), p.to_ned(), [0.0; 3], 0.0, 0)
         else {
             unreachable!()
         };
@@ -1017,5 +1091,51 @@ mod tests {
         assert_eq!(m.coordinate_frame, MavFrame::MAV_FRAME_LOCAL_NED);
         // 3576 plus the yaw bit cleared: position + yaw given.
         assert_eq!(m.type_mask.bits(), 3576 & !1024);
+    }
+
+    #[test]
+    fn a_moving_target_sends_its_velocity_in_ned_with_the_position_velocity_mask() {
+        // 2 m/s east, 1 m/s north in ENU is vx (north) 1, vy (east) 2 in NED.
+        let v = PositionEnu::from_xy(&Enu2::new(2.0, 1.0), 0.0).to_ned();
+        let p = PositionNed {
+            x_north_m: 4.0,
+            y_east_m: 3.0,
+            z_down_m: -10.0,
+        };
+        let MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) =
+            position_target((1, 1), p, [v.x_north_m, v.y_east_m, 0.0], 0.0, 0)
+        else {
+            unreachable!()
+        };
+        assert_eq!((m.vx, m.vy, m.vz), (1.0, 2.0, 0.0));
+        // 3520 (position + velocity) with yaw given.
+        assert_eq!(m.type_mask.bits(), 3520 & !1024);
+    }
+
+    #[test]
+    fn a_moving_setpoint_advances_with_time_and_stops_at_the_geofence() {
+        let t0 = Instant::now();
+        let s = StreamedTarget {
+            position_ned: PositionEnu::from_xy(&Enu2::new(0.0, 0.0), 10.0).to_ned(),
+            velocity_ned: [0.0, 5.0, 0.0],
+            yaw_ned: 0.0,
+            since: t0,
+        };
+        let fence = BoundsEnu {
+            x_min_m: -10.0,
+            x_max_m: 12.0,
+            y_min_m: -10.0,
+            y_max_m: 10.0,
+        };
+        let (p, v) = s.at(t0 + Duration::from_secs(2), Some(&fence));
+        assert_eq!(p.to_enu().xy(), Enu2::new(10.0, 0.0));
+        assert_eq!(v, [0.0, 5.0, 0.0]);
+        let (p, v) = s.at(t0 + Duration::from_secs(3), Some(&fence));
+        assert_eq!(
+            p.to_enu().xy(),
+            Enu2::new(12.0, 0.0),
+            "stopped at the fence"
+        );
+        assert_eq!(v, [0.0; 3]);
     }
 }

@@ -58,7 +58,30 @@ impl Config {
             max_outside_fraction: f.max_outside_fraction,
             init_speed_max_mps: self.motion.cv_max_speed_mps,
             dt_s: self.filter_dt_s(),
+            redraw_on_roads: true,
+            road_sigma_m: self.road_sigma_m(),
         }
+    }
+
+    /// The road constraint's sigma (`filter.road_sigma_m`, or three times the measurement
+    /// noise's largest sigma); `None` when turned off with 0.
+    pub fn road_sigma_m(&self) -> Option<f64> {
+        let sigma = self.filter.road_sigma_m.unwrap_or_else(|| {
+            let r = self.measurement.noise_cov_m2;
+            3.0 * nalgebra::Matrix2::new(r[0][0], r[0][1], r[1][0], r[1][1])
+                .symmetric_eigenvalues()
+                .max()
+                .max(0.0)
+                .sqrt()
+        });
+        (sigma > 0.0).then_some(sigma)
+    }
+
+    /// The operator's cue as a region (centre, radius), world ENU.
+    pub fn cue_region(&self) -> Option<(Enu2, f64)> {
+        self.acquisition
+            .as_ref()
+            .map(|a| (Enu2::new(a.cue_enu_m[0], a.cue_enu_m[1]), a.cue_radius_m))
     }
 
     /// EER's parameters.
@@ -131,6 +154,9 @@ impl Config {
             eer: self.eer_params(),
             lawn: self.guidance.lawn.clone(),
             failsafe: failsafe.then(|| self.failsafe()),
+            cue: self.cue_region(),
+            respread_after_s: Some(self.daemon.target_lost_after_s),
+            injection_share: self.filter.hypothesis_injection,
         }
     }
 }

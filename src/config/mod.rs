@@ -86,6 +86,20 @@ pub struct Config {
     /// The daemon (`infotrack run`): vehicle link, camera, rates and failsafes.
     #[serde(default)]
     pub daemon: DaemonConfig,
+    /// Where the operator says the target is when tracking starts (optional).
+    #[serde(default)]
+    pub acquisition: Option<AcquisitionConfig>,
+}
+
+/// The operator's cue: where the target is when tracking starts, and how sure they are.
+/// Without one, the filter starts spread over the whole road network.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AcquisitionConfig {
+    /// Where the target is said to be, `[x, y]` in the world ENU frame, metres.
+    pub cue_enu_m: [f64; 2],
+    /// How sure: the target is on a road within this radius of the cue, metres.
+    pub cue_radius_m: f64,
 }
 
 /// The daemon's settings (`infotrack run`).
@@ -301,6 +315,20 @@ pub struct FilterConfig {
     pub miss_probability: f64,
     /// Re-draw every particle uniformly when more than this share leaves the workspace.
     pub max_outside_fraction: f64,
+    /// How far from a road the target can be, metres (one sigma of the road constraint on
+    /// the particles); default: three times the measurement noise's largest sigma. 0 turns
+    /// the constraint off.
+    #[serde(default)]
+    pub road_sigma_m: Option<f64>,
+    /// Share of the particles replaced, at each step without a measurement, by hypotheses
+    /// on the roads around the belief, for a motion model that does not know the roads
+    /// (constant velocity); 0 turns it off.
+    #[serde(default = "default_hypothesis_injection")]
+    pub hypothesis_injection: f64,
+}
+
+fn default_hypothesis_injection() -> f64 {
+    0.02
 }
 
 /// Motion models of the particle filter.

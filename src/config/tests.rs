@@ -158,3 +158,42 @@ fn missing_file_names_the_path() {
     let err = Config::load(Path::new("/nonexistent/infotrack.toml")).unwrap_err();
     assert!(err.to_string().contains("/nonexistent/infotrack.toml"));
 }
+
+#[test]
+fn a_cue_outside_the_workspace_or_off_every_road_names_the_key() {
+    let base = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"),
+    )
+    .unwrap();
+    let base = base.split("[acquisition]").next().unwrap().to_string();
+    let with = |cue: &str, r: &str| {
+        format!("{base}\n[acquisition]\ncue_enu_m = {cue}\ncue_radius_m = {r}\n")
+    };
+    let load = |t: &str| Config::from_toml_str(t, std::path::Path::new("t.toml"));
+    assert!(load(&with("[20.0, 10.0]", "150.0")).is_ok());
+    let e = load(&with("[5000.0, 10.0]", "150.0"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("acquisition.cue_enu_m") && e.contains("workspace"),
+        "{e}"
+    );
+    // (300, 400) is 300 m from the nearest road.
+    let e = load(&with("[300.0, 400.0]", "100.0"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("acquisition.cue_enu_m") && e.contains("no road"),
+        "{e}"
+    );
+    let e = load(&with("[20.0, 10.0]", "-1.0")).unwrap_err().to_string();
+    assert!(e.contains("acquisition.cue_radius_m"), "{e}");
+    // Unknown keys are errors there too.
+    let e = load(&format!(
+        "{}cue_height_m = 3.0\n",
+        with("[20.0, 10.0]", "150.0")
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("cue_height_m"), "{e}");
+}

@@ -91,6 +91,8 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     validate_road(c)?;
     validate_vision(c)?;
     validate_daemon(c)?;
+    validate_acquisition(c)?;
+    validate_road_sigma(c)?;
 
     for (i, occ) in c.occlusions.iter().enumerate() {
         let key = format!("occlusions[{i}].vertices_enu_m");
@@ -463,6 +465,48 @@ fn validate_daemon(c: &Config) -> Result<(), ConfigError> {
             "daemon.target_lost_fallback",
             &d.target_lost_fallback,
             "must be eer, lawn or hold",
+        ));
+    }
+    Ok(())
+}
+
+fn validate_road_sigma(c: &Config) -> Result<(), ConfigError> {
+    in_unit("filter.hypothesis_injection", c.filter.hypothesis_injection)?;
+    match c.filter.road_sigma_m {
+        Some(s) => non_negative("filter.road_sigma_m", s),
+        None => Ok(()),
+    }
+}
+
+fn validate_acquisition(c: &Config) -> Result<(), ConfigError> {
+    let Some(a) = &c.acquisition else {
+        return Ok(());
+    };
+    positive("acquisition.cue_radius_m", a.cue_radius_m)?;
+    let cue = Enu2::new(a.cue_enu_m[0], a.cue_enu_m[1]);
+    if !(cue.x.is_finite() && cue.y.is_finite() && c.workspace_enu.contains(&cue)) {
+        return Err(invalid(
+            "acquisition.cue_enu_m",
+            a.cue_enu_m,
+            &format!(
+                "must lie inside the workspace (workspace_enu: x {}..{}, y {}..{})",
+                c.workspace_enu.x_min_m,
+                c.workspace_enu.x_max_m,
+                c.workspace_enu.y_min_m,
+                c.workspace_enu.y_max_m
+            ),
+        ));
+    }
+    let road = crate::world::road::RoadNetwork::from_config(&c.road);
+    if road.length_within(Some((cue, a.cue_radius_m))) <= 0.0 {
+        return Err(invalid(
+            "acquisition.cue_enu_m",
+            a.cue_enu_m,
+            &format!(
+                "no road lies within acquisition.cue_radius_m = {} m of the cue: the target \
+                 drives on the roads, so the cue must be near one",
+                a.cue_radius_m
+            ),
         ));
     }
     Ok(())

@@ -61,7 +61,10 @@ pub fn render(records: &[FlightRecord], seed: u64, motion: &str) -> String {
             .measurement_enu
             .map_or((f64::NAN, f64::NAN), |z| (z.x, z.y));
         let (cmd, cx, cy) = match r.command {
-            Some(Command::GoTo(w)) => ("goto", w.x, w.y),
+            // The setpoint at the decision (its velocity is in the tlog's targets).
+            Some(Command::GoTo {
+                position_enu: w, ..
+            }) => ("goto", w.x, w.y),
             Some(Command::HoldHere) => ("hold", f64::NAN, f64::NAN),
             None => ("none", f64::NAN, f64::NAN),
         };

@@ -34,6 +34,7 @@ use crate::autopilot::link::{LinkConfig, LinkError, VehicleLink};
 use crate::autopilot::modes::{Flavor, Mode};
 use crate::autopilot::signing::SigningKey;
 use crate::config::Config;
+use crate::frames::Enu2;
 use crate::frames::PositionEnu;
 use crate::metrics::RunSummary;
 use crate::mock::server::{spawn, Faults, MockHandle};
@@ -665,12 +666,15 @@ impl Supervisor<'_> {
         }
         if let Some(c) = cmd {
             let target = match c {
-                Command::GoTo(w) => Some(w),
-                Command::HoldHere => snap.map(|s| s.pose.position_enu()),
+                Command::GoTo {
+                    position_enu,
+                    velocity_enu,
+                } => Some((position_enu, velocity_enu)),
+                Command::HoldHere => snap.map(|s| (s.pose.position_enu(), Enu2::zeros())),
             };
-            if let Some(w) = target {
+            if let Some((w, v)) = target {
                 let p = PositionEnu::from_xy(&w, self.cfg.agent.altitude_m);
-                if let Err(e) = self.vehicle.link.set_setpoint(p, 0.0) {
+                if let Err(e) = self.vehicle.link.set_moving_setpoint(p, v, 0.0) {
                     self.geofence_refusals += 1;
                     tracing::warn!("{e}");
                 }

@@ -464,6 +464,7 @@ impl Pipeline {
             link_lost: snapshot.map_or(true, |s| s.link_lost),
             // No ground truth in the field.
             truth_enu: synthetic.then_some(self.target.position_enu),
+            truth_velocity_enu: self.target.velocity_enu,
         };
         let out = match self.tracker.tick(&input, &mut self.sensor, &self.clock) {
             Ok(out) => out,

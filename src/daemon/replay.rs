@@ -77,6 +77,7 @@ pub fn replay(
             vehicle_enu: Some(s.vehicle_enu),
             link_lost: false,
             truth_enu: None,
+            truth_velocity_enu: Enu2::zeros(),
         };
         let step = tracker.update(s.t_s, observation, &input, &FrozenClock)?;
         let est = step.record.estimate_enu;
@@ -85,7 +86,9 @@ pub fn replay(
         if let Some(flown) = s.command_enu {
             let decided = tracker.decide(s.t_s, &s.vehicle_enu, None, &FrozenClock)?;
             if let Some(Decision::Command {
-                command: Command::GoTo(w),
+                command: Command::GoTo {
+                    position_enu: w, ..
+                },
                 ..
             }) = decided
             {

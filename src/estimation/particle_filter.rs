@@ -46,6 +46,15 @@ pub struct FilterParams {
     pub init_speed_max_mps: f64,
     /// Filter period, s.
     pub dt_s: f64,
+    /// When the filter must start over (weights degenerate without a measurement, or too
+    /// many particles outside the workspace), it re-draws on the whole road network (the
+    /// target is a vehicle on its roads) rather than over the workspace rectangle.
+    pub redraw_on_roads: bool,
+    /// The target drives on the roads: after each prediction a particle's weight is
+    /// multiplied by exp(-d^2 / 2 sigma^2), d its distance to the nearest road, so that
+    /// tracks that drive off the network (a constant-velocity track past a bend) fade;
+    /// `None`: no such constraint.
+    pub road_sigma_m: Option<f64>,
 }
 
 /// What the filter did to its particle set in one step.
@@ -134,6 +143,127 @@ impl ParticleFilter {
         };
         pf.redraw_uniform(rng);
         pf
+    }
+
+    /// A filter with particles on the roads of `world` within `region` (a centre and a
+    /// radius, world ENU; `None`: the whole network), each moving along its road's
+    /// allowed direction at a speed drawn from [0, init_speed_max].
+    pub fn on_roads<R: Rng + ?Sized>(
+        params: FilterParams,
+        world: &World,
+        region: Option<(Enu2, f64)>,
+        rng: &mut R,
+    ) -> Self {
+        let mut pf = Self::new(params, world.workspace_enu, rng);
+        pf.spread_on_roads(world, region, rng);
+        pf
+    }
+
+    /// Starts over on the roads within `region` (see [`Self::on_roads`]); where no road
+    /// lies in the region, on the whole network; without roads, over the workspace.
+    pub fn spread_on_roads<R: Rng + ?Sized>(
+        &mut self,
+        world: &World,
+        region: Option<(Enu2, f64)>,
+        rng: &mut R,
+    ) {
+        let speeds = 0.0..=self.params.init_speed_max_mps;
+        self.spread_on_roads_at(world, region, speeds, rng);
+    }
+
+    /// [`Self::spread_on_roads`] with speeds drawn from `speeds_mps`.
+    pub fn spread_on_roads_at<R: Rng + ?Sized>(
+        &mut self,
+        world: &World,
+        region: Option<(Enu2, f64)>,
+        speeds_mps: std::ops::RangeInclusive<f64>,
+        rng: &mut R,
+    ) {
+        let road = &world.road;
+        let region = region.filter(|r| road.length_within(Some(*r)) > 0.0);
+        if road.length_within(region) <= 0.0 {
+            self.redraw_uniform(rng);
+            return;
+        }
+        let k = self.params.history_len;
+        for i in 0..self.weights.len() {
+            let Some((p, dir)) = road.sample_on_roads(region, rng) else {
+                continue;
+            };
+            let speed = rng.gen_range(speeds_mps.clone());
+            let v_step = dir * speed * self.params.dt_s;
+            let tr = self.histories.track_mut(i);
+            for t in 0..k {
+                let q = p - v_step * (k - 1 - t) as f64;
+                tr[2 * t] = q.x;
+                tr[2 * t + 1] = q.y;
+            }
+        }
+        let n = self.weights.len();
+        self.weights.fill(1.0 / n as f64);
+    }
+
+    /// Weighted mean velocity, world ENU, m/s: each particle's motion over its last (up to)
+    /// three filter periods, which averages out most of the process noise of single steps.
+    pub fn mean_velocity(&self) -> Enu2 {
+        let k = self.params.history_len;
+        if k < 2 {
+            return Enu2::zeros();
+        }
+        let span = (k - 1).min(3);
+        let mut v = Enu2::zeros();
+        for (i, w) in self.weights.iter().enumerate() {
+            v += (self.histories.at(i, k - 1) - self.histories.at(i, k - 1 - span)) * *w;
+        }
+        v / (span as f64 * self.params.dt_s)
+    }
+
+    /// Replaces `count` particles drawn at random with new ones on the roads within
+    /// `region` (see [`Self::on_roads`]), each given the mean weight: fresh hypotheses where
+    /// the target can have gone, that the next frames confirm or rule out (sensor resetting,
+    /// as in augmented Monte Carlo localisation).
+    pub fn inject_on_roads<R: Rng + ?Sized>(
+        &mut self,
+        world: &World,
+        region: Option<(Enu2, f64)>,
+        count: usize,
+        speeds_mps: std::ops::RangeInclusive<f64>,
+        rng: &mut R,
+    ) {
+        let road = &world.road;
+        let region = region.filter(|r| road.length_within(Some(*r)) > 0.0);
+        let n = self.weights.len();
+        if count == 0 || road.length_within(region) <= 0.0 {
+            return;
+        }
+        let k = self.params.history_len;
+        let w = 1.0 / n as f64;
+        for _ in 0..count.min(n) {
+            let i = rng.gen_range(0..n);
+            let Some((p, dir)) = road.sample_on_roads(region, rng) else {
+                return;
+            };
+            let speed = rng.gen_range(speeds_mps.clone());
+            let v_step = dir * speed * self.params.dt_s;
+            let tr = self.histories.track_mut(i);
+            for t in 0..k {
+                let q = p - v_step * (k - 1 - t) as f64;
+                tr[2 * t] = q.x;
+                tr[2 * t + 1] = q.y;
+            }
+            self.weights[i] = w;
+        }
+        self.normalize();
+    }
+
+    /// Starts over with no information: on the roads or over the workspace (see
+    /// [`FilterParams::redraw_on_roads`]).
+    fn redraw<R: Rng + ?Sized>(&mut self, world: &World, rng: &mut R) {
+        if self.params.redraw_on_roads {
+            self.spread_on_roads(world, None, rng);
+        } else {
+            self.redraw_uniform(rng);
+        }
     }
 
     /// The parameters.
@@ -229,7 +359,7 @@ impl ParticleFilter {
                     step = self.step_index,
                     "particle weights degenerate (all zero or not finite) with no measurement; re-drawing uniformly"
                 );
-                self.redraw_uniform(rng);
+                self.redraw(world, rng);
             }
             ResampleAction::Recovered
         } else {
@@ -241,7 +371,7 @@ impl ParticleFilter {
             action
         } else if self.outside_fraction() > self.params.max_outside_fraction {
             self.counters.uniform_redraws += 1;
-            self.redraw_uniform(rng);
+            self.redraw(world, rng);
             ResampleAction::UniformRedraw
         } else if n_eff < self.params.resample_threshold * n {
             if measurement.is_some() && n_eff < self.params.reseed_threshold * n {
@@ -322,6 +452,13 @@ impl ParticleFilter {
     }
 
     fn update(&mut self, measurement: Option<Enu2>, agent_enu: &Enu2, world: &World) {
+        if let Some(sigma) = self.params.road_sigma_m {
+            let k = -0.5 / (sigma * sigma);
+            for i in 0..self.weights.len() {
+                let d = world.road.distance_to_roads(&self.histories.newest(i));
+                self.weights[i] *= (k * d * d).exp();
+            }
+        }
         match measurement {
             Some(z) => {
                 // Log-domain with the maximum subtracted: a measurement far from every
@@ -411,7 +548,13 @@ impl ParticleFilter {
             hi = hi.sup(&p);
         }
         let k = self.params.roughening * (n as f64).powf(-1.0 / 3.0);
-        let sigma = (hi - lo) * k;
+        let mut sigma = (hi - lo) * k;
+        if let Some(road) = self.params.road_sigma_m {
+            // A cloud spread along a long road would get jitter across it as large as its
+            // length allows, which the road constraint then punishes on the roads that run
+            // across the larger spread: keep the jitter within the road's width.
+            sigma = sigma.map(|s| s.min(0.5 * road));
+        }
         for i in 0..n {
             let jitter = Enu2::new(
                 sigma.x * rng.sample::<f64, _>(StandardNormal),
@@ -438,7 +581,7 @@ impl ParticleFilter {
             .cloned()
             .collect();
         let Some(&(_, oldest)) = in_window.first() else {
-            self.redraw_uniform(rng);
+            self.redraw(world, rng);
             return;
         };
         let slot_centre: Vec<Enu2> = (0..k)

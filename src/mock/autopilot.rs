@@ -87,6 +87,8 @@ pub struct MockAutopilot {
     yaw_ned_rad: f64,
     /// Target the vehicle flies to in the current mode, local NED.
     target_ned_m: Option<[f64; 3]>,
+    /// Velocity of the last position + velocity target (feed-forward), NED, m/s.
+    target_vel_ned_mps: [f64; 3],
     /// Time of the last valid offboard/guided position setpoint and its position.
     last_setpoint: Option<(f64, [f64; 3])>,
     /// PX4: the mode was left because the offboard stream stopped.
@@ -160,6 +162,7 @@ impl MockAutopilot {
             state: KinematicState::default(),
             yaw_ned_rad: 0.0,
             target_ned_m: None,
+            target_vel_ned_mps: [0.0; 3],
             last_setpoint: None,
             offboard_lost: false,
             takeoff_alt_m: None,
@@ -264,6 +267,7 @@ impl MockAutopilot {
 
     fn set_mode_internal(&mut self, mode: Mode) {
         self.mode = mode;
+        self.target_vel_ned_mps = [0.0; 3];
         self.target_ned_m = match mode {
             // Stop where braking at the acceleration limit ends, as a multicopter's brake
             // and loiter do, rather than turning back to where the switch happened.
@@ -282,6 +286,20 @@ impl MockAutopilot {
         };
         if mode != Mode::Guided {
             self.takeoff_alt_m = None;
+        }
+    }
+
+    /// ArduPilot's GUIDED moves a position + velocity target along its velocity between
+    /// messages (its position controller integrates the target); PX4 holds each target as
+    /// sent until the next one.
+    fn advance_moving_target(&mut self, dt: f64) {
+        if self.cfg.flavor != Flavor::ArduPilot {
+            return;
+        }
+        if let Some(t) = self.target_ned_m.as_mut() {
+            for (tk, vk) in t.iter_mut().zip(self.target_vel_ned_mps) {
+                *tk += vk * dt;
+            }
         }
     }
 
@@ -518,6 +536,22 @@ impl MockAutopilot {
             return out;
         }
         let target = [sp.x as f64, sp.y as f64, sp.z as f64];
+        let vel_ignored = sp.type_mask.intersects(
+            PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+                | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE,
+        );
+        let velocity = if vel_ignored {
+            [0.0; 3]
+        } else if [sp.vx, sp.vy, sp.vz].iter().all(|v| v.is_finite()) {
+            [sp.vx as f64, sp.vy as f64, sp.vz as f64]
+        } else {
+            out.push(self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "position target ignored: non-finite velocity",
+            ));
+            return out;
+        };
         if !sp
             .type_mask
             .contains(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE)
@@ -530,6 +564,7 @@ impl MockAutopilot {
                 self.last_setpoint = Some((self.now_s, target));
                 if self.mode == Mode::Offboard {
                     self.target_ned_m = Some(target);
+                    self.target_vel_ned_mps = velocity;
                 } else if self.offboard_lost {
                     // PX4 goes back to OFFBOARD by itself when valid setpoints resume.
                     self.offboard_lost = false;
@@ -557,6 +592,7 @@ impl MockAutopilot {
                 }
                 self.last_setpoint = Some((self.now_s, target));
                 self.target_ned_m = Some(target);
+                self.target_vel_ned_mps = velocity;
             }
         }
         out
@@ -603,7 +639,9 @@ impl MockAutopilot {
             }
             if dt > 0.0 {
                 let limits = self.limits();
-                self.state.step(self.target_ned_m, &limits, dt);
+                self.advance_moving_target(dt);
+                self.state
+                    .step(self.target_ned_m, self.target_vel_ned_mps, &limits, dt);
             }
             self.check_geofence(&mut out);
             // RTL: over home, then land; landed: disarm.

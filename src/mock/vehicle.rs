@@ -29,13 +29,22 @@ const POSITION_GAIN_PER_S: f64 = 1.0;
 const GRAVITY_MPS2: f64 = 9.80665;
 
 impl KinematicState {
-    /// Moves `dt_s` toward `target_ned_m` (or brakes to a stop with `None`) within `limits`.
-    pub fn step(&mut self, target_ned_m: Option<[f64; 3]>, limits: &Limits, dt_s: f64) {
+    /// Moves `dt_s` toward `target_ned_m` (or brakes to a stop with `None`) within `limits`;
+    /// `feed_forward_ned_mps` is added to the position loop's velocity command (a position
+    /// + velocity target).
+    pub fn step(
+        &mut self,
+        target_ned_m: Option<[f64; 3]>,
+        feed_forward_ned_mps: [f64; 3],
+        limits: &Limits,
+        dt_s: f64,
+    ) {
         let desired = match target_ned_m {
             Some(t) => {
                 let mut v = [0.0; 3];
                 for (k, vk) in v.iter_mut().enumerate() {
-                    *vk = POSITION_GAIN_PER_S * (t[k] - self.pos_ned_m[k]);
+                    *vk =
+                        POSITION_GAIN_PER_S * (t[k] - self.pos_ned_m[k]) + feed_forward_ned_mps[k];
                 }
                 // Horizontal speed limit on the norm; vertical limits by direction.
                 let h = (v[0] * v[0] + v[1] * v[1]).sqrt();
@@ -110,7 +119,7 @@ mod tests {
         let mut max_speed: f64 = 0.0;
         let mut max_climb: f64 = 0.0;
         for _ in 0..(40.0 / dt) as usize {
-            s.step(Some(t), &L, dt);
+            s.step(Some(t), [0.0; 3], &L, dt);
             max_speed = max_speed.max((s.vel_ned_mps[0].powi(2) + s.vel_ned_mps[1].powi(2)).sqrt());
             max_climb = max_climb.max(-s.vel_ned_mps[2]);
         }
@@ -125,7 +134,7 @@ mod tests {
     #[test]
     fn tilts_into_its_acceleration() {
         let mut s = KinematicState::default();
-        s.step(Some([100.0, 0.0, 0.0]), &L, 0.05);
+        s.step(Some([100.0, 0.0, 0.0]), [0.0; 3], &L, 0.05);
         // Accelerating north while facing north: nose down (negative pitch), no roll.
         let (roll, pitch) = s.attitude(0.0);
         assert!(pitch < -0.2 && roll.abs() < 1e-9, "{roll} {pitch}");
@@ -137,7 +146,7 @@ mod tests {
     #[test]
     fn stays_on_the_ground() {
         let mut s = KinematicState::default();
-        s.step(Some([0.0, 0.0, 5.0]), &L, 0.1);
+        s.step(Some([0.0, 0.0, 5.0]), [0.0; 3], &L, 0.1);
         assert_eq!(s.pos_ned_m[2], 0.0);
     }
 }

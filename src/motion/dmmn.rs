@@ -277,6 +277,10 @@ impl MotionModel for Dmmn {
         Some(self.k_in)
     }
 
+    fn knows_the_roads(&self) -> bool {
+        true
+    }
+
     fn predict(&mut self, histories: &Histories, out: &mut [Enu2]) -> Result<(), MotionError> {
         let n = histories.len();
         if histories.k_in() != self.k_in {

@@ -87,6 +87,13 @@ pub trait MotionModel: Send {
     /// Number of history positions the model reads (`K_in`); `None` if any length works.
     fn required_history_len(&self) -> Option<usize>;
 
+    /// Whether the model knows where the roads go (a learned model trained on this world
+    /// turns where the roads turn); the tracker injects road hypotheses only for models
+    /// that do not.
+    fn knows_the_roads(&self) -> bool {
+        false
+    }
+
     /// Writes into `out[i]` the predicted next position of track `i` of `histories`.
     ///
     /// `out.len() == histories.len()`. Outputs may be non-finite if the model misbehaves:

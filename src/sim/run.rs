@@ -166,20 +166,23 @@ impl SimRun {
         let clock = MonotonicClock::new();
         let dt_phys = 1.0 / cfg.timing.physics_hz;
         let n_phys = (spec.duration_s * cfg.timing.physics_hz).round() as u64;
-        let mut waypoint = self.agent.position_enu;
+        let mut setpoint = MovingSetpoint::fixed(self.agent.position_enu);
         let mut steps: Vec<StepRecord> = Vec::new();
         let mut filter_ms = Vec::new();
         let mut guidance_ms = Vec::new();
         let mut snapshots = Vec::new();
         let mut snap_iter = spec.snapshot_times_s.iter().peekable();
-        for _ in 1..=n_phys {
+        for tick in 1..=n_phys {
+            let t_s = tick as f64 * dt_phys;
             self.target.step(&world.road, dt_phys, &mut self.rng_target);
-            self.agent.step(&waypoint, dt_phys);
+            let (sp, ff) = setpoint.at(t_s, &world.workspace_enu);
+            self.agent.step(&sp, &ff, dt_phys);
             sensor.set_target(&self.target);
             let input = TickInput {
                 vehicle_enu: Some(self.agent.position_enu),
                 link_lost: false,
                 truth_enu: Some(self.target.position_enu),
+                truth_velocity_enu: self.target.velocity_enu,
             };
             let out = self.tracker.tick(&input, sensor, &clock)?;
             if let Some(step) = out.step {
@@ -202,8 +205,16 @@ impl SimRun {
             }) = out.decision
             {
                 guidance_ms.push(compute_ms);
-                if let Command::GoTo(w) = command {
-                    waypoint = w;
+                if let Command::GoTo {
+                    position_enu,
+                    velocity_enu,
+                } = command
+                {
+                    setpoint = MovingSetpoint {
+                        position_enu,
+                        velocity_enu,
+                        since_s: out.t_s,
+                    };
                 }
             }
         }
@@ -216,6 +227,35 @@ impl SimRun {
             filter_ms,
             vision: None,
         })
+    }
+}
+
+/// The agent's setpoint: a point moving at a constant velocity from a decision's time on,
+/// stopped at the workspace's edge (the geofence), as the daemon streams it.
+#[derive(Debug, Clone, Copy)]
+struct MovingSetpoint {
+    position_enu: Enu2,
+    velocity_enu: Enu2,
+    since_s: f64,
+}
+
+impl MovingSetpoint {
+    fn fixed(position_enu: Enu2) -> Self {
+        Self {
+            position_enu,
+            velocity_enu: Enu2::zeros(),
+            since_s: 0.0,
+        }
+    }
+
+    /// The setpoint and the feed-forward at `t_s`.
+    fn at(&self, t_s: f64, fence: &crate::world::geometry::BoundsEnu) -> (Enu2, Enu2) {
+        let p = self.position_enu + self.velocity_enu * (t_s - self.since_s);
+        if fence.contains(&p) {
+            (p, self.velocity_enu)
+        } else {
+            (fence.clamp(&p), Enu2::zeros())
+        }
     }
 }
 

@@ -15,6 +15,8 @@ pub struct TargetSim {
     pub heading_enu_rad: f64,
     /// Index of the node it is driving to.
     pub goal_node: usize,
+    /// Velocity over the last step, m/s.
+    pub velocity_enu: Enu2,
     params: TargetConfig,
 }
 
@@ -29,6 +31,7 @@ impl TargetSim {
             position_enu: p,
             heading_enu_rad: d.y.atan2(d.x),
             goal_node: goal,
+            velocity_enu: Enu2::zeros(),
             params,
         }
     }
@@ -51,8 +54,9 @@ impl TargetSim {
         } else {
             p.cruise_speed_mps.min(p.max_speed_mps)
         };
-        self.position_enu +=
-            Enu2::new(self.heading_enu_rad.cos(), self.heading_enu_rad.sin()) * speed * dt_s;
+        self.velocity_enu =
+            Enu2::new(self.heading_enu_rad.cos(), self.heading_enu_rad.sin()) * speed;
+        self.position_enu += self.velocity_enu * dt_s;
     }
 }
 

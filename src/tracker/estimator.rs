@@ -79,6 +79,14 @@ impl Estimator {
         }
     }
 
+    /// The estimate's velocity, world ENU, m/s.
+    pub fn velocity(&self) -> Enu2 {
+        match self {
+            Self::Particle { pf, .. } => pf.mean_velocity(),
+            Self::Kalman(kf) => kf.velocity(),
+        }
+    }
+
     /// The particle filter, if this is one.
     pub fn particle_filter(&self) -> Option<&ParticleFilter> {
         match self {

@@ -92,6 +92,15 @@ pub struct TrackerParams {
     pub lawn: LawnConfig,
     /// Failsafes; `None`: none, and any failure is an error.
     pub failsafe: Option<Failsafe>,
+    /// The operator's cue (centre, radius, world ENU): the filter starts on the roads
+    /// within it; `None`: on the whole road network.
+    pub cue: Option<(Enu2, f64)>,
+    /// After this long without a measurement, the belief is spread again along the roads
+    /// that the target can have reached from where it was last seen; `None`: never.
+    pub respread_after_s: Option<f64>,
+    /// Share of the particles replaced at each step without a measurement by hypotheses on
+    /// the roads around the belief (0: none), for motion models that do not know the roads.
+    pub injection_share: f64,
 }
 
 /// Why the tracker could not be built or could not go on.
@@ -160,6 +169,10 @@ pub struct Tracker {
     command: Option<Command>,
     entropy: f64,
     last_eer: f64,
+    /// The belief was spread again in the current spell without measurements.
+    respread_done: bool,
+    /// The estimate's speed at the last step with a measurement, m/s.
+    last_seen_speed_mps: f64,
 }
 
 impl Tracker {
@@ -175,9 +188,10 @@ impl Tracker {
         check_combination(params.guidance, estimator)?;
         let built = match estimator {
             EstimatorKind::Particle(name) => Estimator::Particle {
-                pf: Box::new(ParticleFilter::new(
+                pf: Box::new(ParticleFilter::on_roads(
                     params.filter.clone(),
-                    world.workspace_enu,
+                    &world,
+                    params.cue,
                     &mut rng_filter,
                 )),
                 model: motion::build(name, &params.motion)?,
@@ -205,6 +219,8 @@ impl Tracker {
             command: None,
             entropy: f64::NAN,
             last_eer: f64::NAN,
+            respread_done: false,
+            last_seen_speed_mps: 0.0,
         })
     }
 
@@ -262,7 +278,8 @@ impl Tracker {
             out.step = Some(self.update(due.t_s, observation, input, clock)?);
         }
         if due.guidance {
-            out.decision = self.decide(due.t_s, &vehicle_enu, input.truth_enu, clock)?;
+            let truth = input.truth_enu.map(|p| (p, input.truth_velocity_enu));
+            out.decision = self.decide(due.t_s, &vehicle_enu, truth, clock)?;
         }
         Ok(out)
     }
@@ -305,6 +322,11 @@ impl Tracker {
         }
         if z.is_some() {
             self.last_seen_s = t_s;
+            self.respread_done = false;
+            self.last_seen_speed_mps = self.estimator.velocity().norm();
+        } else {
+            self.respread_if_long_unseen(t_s);
+            self.inject_where_it_can_be();
         }
         let before = self.state;
         self.state = self.next_state(t_s, input.link_lost);
@@ -314,7 +336,7 @@ impl Tracker {
             target_enu: truth,
             agent_enu: taken_from,
             waypoint_enu: match self.command {
-                Some(Command::GoTo(w)) => w,
+                Some(Command::GoTo { position_enu, .. }) => position_enu,
                 _ => taken_from,
             },
             measurement_enu: z,
@@ -338,6 +360,72 @@ impl Tracker {
         })
     }
 
+    /// The speeds new hypotheses get: around the speed the target had when last seen (a
+    /// car keeps its speed through a junction it cannot be seen at), or any speed the
+    /// motion model allows when it was not moving or never seen.
+    fn hypothesis_speeds(&self) -> std::ops::RangeInclusive<f64> {
+        let v_max = self.params.filter.init_speed_max_mps;
+        let s = self.last_seen_speed_mps;
+        if self.last_measurement.is_some() && s > 0.1 * v_max {
+            (0.7 * s).min(v_max)..=(1.3 * s).min(v_max)
+        } else {
+            0.0..=v_max
+        }
+    }
+
+    /// After `respread_after_s` without a measurement, once per such spell: the particles
+    /// go back on the roads the target can have reached since it was last seen (within
+    /// the largest speed times the time since, around the last measurement; around the cue
+    /// if it was never seen; anywhere without either).
+    fn respread_if_long_unseen(&mut self, t_s: f64) {
+        let Some(after) = self.params.respread_after_s else {
+            return;
+        };
+        if self.respread_done || t_s - self.last_seen_s <= after {
+            return;
+        }
+        self.respread_done = true;
+        let speeds = self.hypothesis_speeds();
+        let v_far = *speeds.end();
+        let region = match self.last_measurement {
+            Some((tm, zm)) => Some((zm, v_far * (t_s - tm))),
+            None => self.params.cue.map(|(c, r)| (c, r + v_far * t_s)),
+        };
+        if let Estimator::Particle { pf, .. } = &mut self.estimator {
+            pf.spread_on_roads_at(&self.world, region, speeds, &mut self.rng_filter);
+        }
+    }
+
+    /// At each step without a measurement, a share of the particles (`injection_share`) is
+    /// replaced by hypotheses on the roads around the current belief (within two standard
+    /// deviations of its mean plus a second at the largest speed): where the motion model
+    /// drives straight on through a junction or a bend, tracks along the other branches are
+    /// there for the next frames to confirm or rule out.
+    fn inject_where_it_can_be(&mut self) {
+        let share = self.params.injection_share;
+        let knows_roads = match &self.estimator {
+            Estimator::Particle { model, .. } => model.knows_the_roads(),
+            Estimator::Kalman(_) => true,
+        };
+        if share <= 0.0 || knows_roads {
+            return;
+        }
+        let v_max = self.params.filter.init_speed_max_mps;
+        let sd = self
+            .estimator
+            .covariance()
+            .symmetric_eigenvalues()
+            .max()
+            .max(0.0)
+            .sqrt();
+        let region = Some((self.estimator.mean(), 2.0 * sd + v_max));
+        let speeds = self.hypothesis_speeds();
+        let count = (share * self.params.filter.particles as f64).round() as usize;
+        if let Estimator::Particle { pf, .. } = &mut self.estimator {
+            pf.inject_on_roads(&self.world, region, count, speeds, &mut self.rng_filter);
+        }
+    }
+
     fn next_state(&self, t_s: f64, link_lost: bool) -> TrackState {
         let Some(f) = self.params.failsafe else {
             return TrackState::Tracking;
@@ -353,20 +441,22 @@ impl Tracker {
         }
     }
 
-    /// One guidance decision at `t_s` for a vehicle at `vehicle_enu`. `None`: no decision
-    /// is taken on a stale vehicle state (link lost). Public for `infotrack replay`.
+    /// One guidance decision at `t_s` for a vehicle at `vehicle_enu` (`truth`: the true
+    /// target's position and velocity, world ENU, where a simulator knows them). `None`: no
+    /// decision is taken on a stale vehicle state (link lost). Public for `infotrack
+    /// replay`.
     pub fn decide(
         &mut self,
         t_s: f64,
         vehicle_enu: &Enu2,
-        truth_enu: Option<Enu2>,
+        truth: Option<(Enu2, Enu2)>,
         clock: &dyn Clock,
     ) -> Result<Option<Decision>, TrackerError> {
         if self.state == TrackState::LinkLost {
             return Ok(None);
         }
         let started = clock.now_s();
-        let decided = self.choose(t_s, vehicle_enu, truth_enu);
+        let decided = self.choose(t_s, vehicle_enu, truth);
         let compute_ms = (clock.now_s() - started) * 1e3;
         let failsafe = self.params.failsafe;
         let over_budget = failsafe.is_some_and(|f| compute_ms > f.guidance_budget_ms);
@@ -385,7 +475,13 @@ impl Tracker {
             return Ok(Some(Decision::Overrun { compute_ms }));
         }
         let command = match command {
-            Command::GoTo(w) => Command::GoTo(self.world.workspace_enu.clamp(&w)),
+            Command::GoTo {
+                position_enu,
+                velocity_enu,
+            } => Command::GoTo {
+                position_enu: self.world.workspace_enu.clamp(&position_enu),
+                velocity_enu,
+            },
             hold => hold,
         };
         self.command = Some(command);
@@ -400,7 +496,7 @@ impl Tracker {
         &mut self,
         t_s: f64,
         vehicle_enu: &Enu2,
-        truth_enu: Option<Enu2>,
+        truth: Option<(Enu2, Enu2)>,
     ) -> Result<Command, TrackerError> {
         if let Some(f) = self.params.failsafe {
             match (self.state, f.fallback) {
@@ -408,29 +504,65 @@ impl Tracker {
                     return Ok(Command::HoldHere)
                 }
                 (TrackState::Lost, LostFallback::Lawn) => {
-                    return Ok(Command::GoTo(self.lawn.next_point()))
+                    return Ok(Command::fixed(self.lawn.next_point()))
                 }
                 _ => {}
             }
         }
-        let goal = match self.params.guidance {
+        Ok(match self.params.guidance {
             GuidanceKind::Eer => self.plan_eer(vehicle_enu)?,
-            GuidanceKind::Pfwm => self.estimator.mean(),
-            GuidanceKind::Kf => self
-                .side_kf
-                .as_ref()
-                .map(|k| k.mean())
-                .unwrap_or_else(|| self.estimator.mean()),
-            GuidanceKind::Truth => truth_enu.ok_or(TrackerError::NoTruth)?,
-            GuidanceKind::Lawn => match self.last_measurement {
+            GuidanceKind::Pfwm => Command::GoTo {
+                position_enu: self.estimator.mean(),
+                velocity_enu: self.confident_velocity(),
+            },
+            GuidanceKind::Kf => match &self.side_kf {
+                Some(k) => Command::GoTo {
+                    position_enu: k.mean(),
+                    velocity_enu: k.velocity(),
+                },
+                None => Command::GoTo {
+                    position_enu: self.estimator.mean(),
+                    velocity_enu: self.estimator.velocity(),
+                },
+            },
+            GuidanceKind::Truth => {
+                let (p, v) = truth.ok_or(TrackerError::NoTruth)?;
+                Command::GoTo {
+                    position_enu: p,
+                    velocity_enu: v,
+                }
+            }
+            GuidanceKind::Lawn => Command::fixed(match self.last_measurement {
                 Some((tm, z)) if t_s - tm <= self.params.lawn.track_measurement_for_s => z,
                 _ => self.lawn.next_point(),
-            },
-        };
-        Ok(Command::GoTo(goal))
+            }),
+        })
     }
 
-    fn plan_eer(&mut self, vehicle_enu: &Enu2) -> Result<Enu2, TrackerError> {
+    /// The estimate's velocity when the belief is concentrated enough to be over the
+    /// target (its largest standard deviation within half the footprint's smaller side);
+    /// zero while it is spread out, when a mean velocity means nothing.
+    fn confident_velocity(&self) -> Enu2 {
+        let fp = &self.world.footprint;
+        let sigma = self
+            .estimator
+            .covariance()
+            .symmetric_eigenvalues()
+            .max()
+            .max(0.0)
+            .sqrt();
+        if sigma <= 0.5 * fp.half_width_m.min(fp.half_height_m) {
+            self.estimator.velocity()
+        } else {
+            Enu2::zeros()
+        }
+    }
+
+    /// EER's waypoint is where to be at the end of the horizon; with the target's velocity
+    /// (when the belief is concentrated) the setpoint moves so as to get there then, riding
+    /// along with the target instead of trailing it.
+    fn plan_eer(&mut self, vehicle_enu: &Enu2) -> Result<Command, TrackerError> {
+        let velocity_enu = self.confident_velocity();
         let Estimator::Particle { pf, model } = &mut self.estimator else {
             // Refused at construction by check_combination.
             return Err(TrackerError::Incompatible {
@@ -448,7 +580,11 @@ impl Tracker {
         )?;
         self.entropy = d.h_now;
         self.last_eer = d.eer;
-        Ok(d.waypoint_enu)
+        let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
+        Ok(Command::GoTo {
+            position_enu: d.waypoint_enu - velocity_enu * horizon_s,
+            velocity_enu,
+        })
     }
 }
 

@@ -19,6 +19,8 @@ pub struct TickInput {
     /// The true target position, world ENU, where a simulator knows it (records and
     /// `truth` guidance); `None` in the field.
     pub truth_enu: Option<Enu2>,
+    /// The true target's velocity, world ENU, m/s (zero where unknown).
+    pub truth_velocity_enu: Enu2,
 }
 
 /// The filter's belief before a measurement: where a sensor should look first.
@@ -63,10 +65,29 @@ pub trait Sensor {
 /// What the tracker asks the vehicle to do.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Command {
-    /// Fly to this point, world ENU (inside the workspace), at the tracking altitude.
-    GoTo(Enu2),
+    /// Fly a moving setpoint at the tracking altitude: at `position_enu` (inside the
+    /// workspace) when the decision is taken, moving at `velocity_enu` from then on; the
+    /// velocity is also the autopilot's feed-forward, so that a vehicle following a moving
+    /// target does not trail it by speed / position gain. Zero velocity: a fixed point. The
+    /// sink stops the motion at the geofence.
+    GoTo {
+        /// Where the setpoint is at the decision, world ENU, m.
+        position_enu: Enu2,
+        /// How it moves, world ENU, m/s.
+        velocity_enu: Enu2,
+    },
     /// Stay where it is.
     HoldHere,
+}
+
+impl Command {
+    /// A fixed point.
+    pub fn fixed(position_enu: Enu2) -> Self {
+        Self::GoTo {
+            position_enu,
+            velocity_enu: Enu2::zeros(),
+        }
+    }
 }
 
 /// Tracking state, for the status line, the log and the failsafes.

@@ -41,6 +41,7 @@ fn input(v: Enu2) -> TickInput {
         vehicle_enu: Some(v),
         link_lost: false,
         truth_enu: Some(Enu2::new(0.5, 0.5)),
+        truth_velocity_enu: Enu2::zeros(),
     }
 }
 
@@ -65,7 +66,9 @@ fn one_second_of_lab_ticks_gives_three_steps_and_one_decision_inside_the_fence()
     assert_eq!(s.calls, steps);
     assert_eq!(decisions.len(), c.timing.guidance_hz as usize);
     let Decision::Command {
-        command: Command::GoTo(w),
+        command: Command::GoTo {
+            position_enu: w, ..
+        },
         ..
     } = decisions[0]
     else {
@@ -193,4 +196,81 @@ fn eer_with_a_kalman_estimator_is_refused_with_a_reason() {
     .unwrap();
     let msg = err.to_string();
     assert!(msg.contains("eer") && msg.contains("particle"), "{msg}");
+}
+
+#[test]
+fn the_prior_is_on_the_roads_within_the_cue() {
+    let mut c =
+        Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
+            .unwrap();
+    let (cue, r) = (Enu2::new(600.0, 200.0), 120.0);
+    c.acquisition = Some(crate::config::AcquisitionConfig {
+        cue_enu_m: [cue.x, cue.y],
+        cue_radius_m: r,
+    });
+    let t = tracker(&c, GuidanceKind::Eer, false);
+    let pf = t.estimator().particle_filter().unwrap();
+    let road = &t.world().road;
+    for p in pf.particles() {
+        assert!(road.distance_to_roads(&p) < 1e-6, "{p} is off the roads");
+        assert!((p - cue).norm() <= r + 1e-6, "{p} is outside the cue");
+    }
+    // Each particle moves along its road: its history is a straight track on it.
+    let h = pf.histories();
+    let k = h.k_in();
+    for i in 0..h.len() {
+        let v = h.at(i, k - 1) - h.at(i, k - 2);
+        assert!(v.norm() <= c.motion.cv_max_speed_mps / c.timing.filter_hz + 1e-9);
+    }
+    // Without a cue, the whole network: no particle off the roads either.
+    c.acquisition = None;
+    let t = tracker(&c, GuidanceKind::Eer, false);
+    let pf = t.estimator().particle_filter().unwrap();
+    let far = pf
+        .particles()
+        .iter()
+        .filter(|p| (*p - cue).norm() > r)
+        .count();
+    assert!(
+        far > pf.particles().len() / 2,
+        "the prior should cover the whole network"
+    );
+    assert!(pf
+        .particles()
+        .iter()
+        .all(|p| t.world().road.distance_to_roads(p) < 1e-6));
+}
+
+#[test]
+fn eer_over_a_concentrated_belief_moves_with_the_target() {
+    // A car driving east at 10 m/s, measured at every step: the setpoint carries its
+    // velocity, so a vehicle following it does not trail by speed / gain.
+    let c =
+        Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
+            .unwrap();
+    let mut t = tracker(&c, GuidanceKind::Pfwm, false);
+    let mut last = None;
+    let mut x = 20.0;
+    let n = (c.timing.physics_hz * 10.0) as usize;
+    for _ in 0..n {
+        x += 10.0 / c.timing.physics_hz;
+        let mut s = Scripted {
+            z: Some(Enu2::new(x, 0.0)),
+            frozen: false,
+            calls: 0,
+        };
+        let out = t
+            .tick(&input(Enu2::new(x, 0.0)), &mut s, &FrozenClock)
+            .unwrap();
+        if let Some(Decision::Command { command, .. }) = out.decision {
+            last = Some(command);
+        }
+    }
+    let Some(Command::GoTo { velocity_enu, .. }) = last else {
+        panic!("{last:?}")
+    };
+    assert!(
+        (velocity_enu - Enu2::new(10.0, 0.0)).norm() < 1.5,
+        "{velocity_enu}"
+    );
 }

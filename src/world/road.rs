@@ -59,6 +59,8 @@ pub struct RoadNetwork {
     pub nodes: Vec<RoadNode>,
     /// Index of the start node.
     pub start: usize,
+    /// Every directed edge as its end points, world ENU.
+    segments: Vec<(Enu2, Enu2)>,
 }
 
 impl RoadNetwork {
@@ -79,10 +81,30 @@ impl RoadNetwork {
                     .collect(),
             })
             .collect();
-        Self {
+        let mut road = Self {
             nodes,
             start: index(c.start_node),
-        }
+            segments: Vec::new(),
+        };
+        road.segments = road.edges_enu();
+        road
+    }
+
+    /// Distance from `p` to the nearest road, m (infinite without roads).
+    pub fn distance_to_roads(&self, p: &Enu2) -> f64 {
+        self.segments
+            .iter()
+            .map(|(a, b)| {
+                let d = b - a;
+                let len2 = d.dot(&d);
+                let t = if len2 > 0.0 {
+                    ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (a + d * t - p).norm()
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Samples the node after `from` by its transition probabilities.
@@ -100,6 +122,54 @@ impl RoadNetwork {
         next.last().map(|&(to, _)| to).unwrap_or(from)
     }
 
+    /// A point on the roads, drawn uniformly by length over the parts of every edge that lie
+    /// within `region` (a centre and a radius, world ENU; `None`: the whole network), with
+    /// the unit direction the edge allows. `None` when no road lies in the region.
+    pub fn sample_on_roads<R: Rng + ?Sized>(
+        &self,
+        region: Option<(Enu2, f64)>,
+        rng: &mut R,
+    ) -> Option<(Enu2, Enu2)> {
+        let pieces = self.pieces_within(region);
+        let total: f64 = pieces.iter().map(|(a, b)| (b - a).norm()).sum();
+        if total.is_nan() || total <= 0.0 {
+            return None;
+        }
+        let mut u = rng.gen_range(0.0..total);
+        for (a, b) in &pieces {
+            let len = (b - a).norm();
+            if u <= len {
+                let dir = (b - a) / len;
+                return Some((a + dir * u, dir));
+            }
+            u -= len;
+        }
+        let (a, b) = pieces.last()?;
+        Some((*b, (b - a).normalize()))
+    }
+
+    /// Total length of road within `region`, m.
+    pub fn length_within(&self, region: Option<(Enu2, f64)>) -> f64 {
+        self.pieces_within(region)
+            .iter()
+            .map(|(a, b)| (b - a).norm())
+            .sum()
+    }
+
+    /// The parts of every directed edge inside `region` (each edge is straight, so its part
+    /// in a disc is one segment), in the edge's direction; zero-length parts left out.
+    fn pieces_within(&self, region: Option<(Enu2, f64)>) -> Vec<(Enu2, Enu2)> {
+        self.segments
+            .iter()
+            .copied()
+            .filter_map(|(a, b)| match region {
+                None => Some((a, b)),
+                Some((c, r)) => clip_to_disc(a, b, c, r),
+            })
+            .filter(|(a, b)| (b - a).norm() > 1e-9)
+            .collect()
+    }
+
     /// Straight edges as pairs of end points (for plots).
     pub fn edges_enu(&self) -> Vec<(Enu2, Enu2)> {
         self.nodes
@@ -111,6 +181,24 @@ impl RoadNetwork {
             })
             .collect()
     }
+}
+
+/// The part of segment a-b inside the disc (centre c, radius r), if any.
+fn clip_to_disc(a: Enu2, b: Enu2, c: Enu2, r: f64) -> Option<(Enu2, Enu2)> {
+    let d = b - a;
+    let f = a - c;
+    let (qa, qb, qc) = (d.dot(&d), 2.0 * f.dot(&d), f.dot(&f) - r * r);
+    if qa <= 0.0 {
+        return (qc <= 0.0).then_some((a, b));
+    }
+    let disc = qb * qb - 4.0 * qa * qc;
+    if disc < 0.0 {
+        return None;
+    }
+    let sq = disc.sqrt();
+    let t0 = ((-qb - sq) / (2.0 * qa)).max(0.0);
+    let t1 = ((-qb + sq) / (2.0 * qa)).min(1.0);
+    (t0 < t1).then(|| (a + d * t0, a + d * t1))
 }
 
 #[cfg(test)]
@@ -139,5 +227,52 @@ mod tests {
         let road = RoadNetwork::from_config(&Config::default_lab().road);
         assert_eq!(road.edges_enu().len(), 7);
         assert_eq!(road.nodes[road.start].id, 1);
+    }
+
+    fn distance_to_roads(road: &RoadNetwork, p: &Enu2) -> f64 {
+        road.distance_to_roads(p)
+    }
+
+    #[test]
+    fn points_on_the_roads_lie_on_an_edge_inside_the_region_in_its_direction() {
+        let road = RoadNetwork::from_config(&Config::default_lab().road);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let region = (Enu2::new(0.35, 0.2), 0.5);
+        for _ in 0..2000 {
+            let (p, dir) = road.sample_on_roads(Some(region), &mut rng).unwrap();
+            assert!(distance_to_roads(&road, &p) < 1e-9, "{p} is off the roads");
+            assert!(
+                (p - region.0).norm() <= region.1 + 1e-9,
+                "{p} outside the region"
+            );
+            assert!((dir.norm() - 1.0).abs() < 1e-12);
+        }
+        // Within 0.5 m of (0.35, 0.2) only the edge 2 -> 3 (x = 0.35, northward) passes:
+        // every direction drawn there is north.
+        let (_, dir) = road.sample_on_roads(Some(region), &mut rng).unwrap();
+        assert!((dir - Enu2::new(0.0, 1.0)).norm() < 1e-9, "{dir}");
+        assert!((road.length_within(Some(region)) - 1.0).abs() < 1e-9);
+        // No road far away.
+        assert!(road
+            .sample_on_roads(Some((Enu2::new(50.0, 50.0), 1.0)), &mut rng)
+            .is_none());
+    }
+
+    #[test]
+    fn the_whole_network_is_drawn_by_length() {
+        let road = RoadNetwork::from_config(&Config::default_lab().road);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let total = road.length_within(None);
+        // Edge 2 -> 3 is 1.6 m of the network: its share of draws follows.
+        let n = 20_000;
+        let on_2_3 = (0..n)
+            .filter(|_| {
+                let (p, _) = road.sample_on_roads(None, &mut rng).unwrap();
+                (p.x - 0.35).abs() < 1e-9 && p.y > -0.6 && p.y < 1.0
+            })
+            .count();
+        let share = on_2_3 as f64 / n as f64;
+        let expected = 1.6 / total;
+        assert!((share - expected).abs() < 0.015, "{share} vs {expected}");
     }
 }

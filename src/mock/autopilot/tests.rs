@@ -391,3 +391,71 @@ fn reboot_keeps_parameters_and_forgets_the_flight() {
     });
     assert_eq!(boot_ms, Some(500));
 }
+
+/// Streams a target moving at `v_ned` (position + velocity mask 3520) at 20 Hz, as the link
+/// does, and returns how far the vehicle trails it at the end.
+fn follow_moving_target(m: &mut MockAutopilot, t0: f64, secs: f64, v_ned: [f32; 2]) -> f64 {
+    let start = m.position_ned_m();
+    let mut t = t0;
+    let mut target = [0.0f32; 2];
+    while t < t0 + secs {
+        t += 0.05;
+        let dt = (t - t0) as f32;
+        target = [
+            start[0] as f32 + v_ned[0] * dt,
+            start[1] as f32 + v_ned[1] * dt,
+        ];
+        m.handle(
+            t,
+            &GCS,
+            &MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+                x: target[0],
+                y: target[1],
+                z: -10.0,
+                vx: v_ned[0],
+                vy: v_ned[1],
+                vz: 0.0,
+                type_mask: PositionTargetTypemask::from_bits_truncate(3520),
+                target_system: 1,
+                target_component: 1,
+                coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+                ..Default::default()
+            }),
+        );
+        m.tick(t);
+    }
+    let p = m.position_ned_m();
+    ((p[0] - target[0] as f64).powi(2) + (p[1] - target[1] as f64).powi(2)).sqrt()
+}
+
+#[test]
+fn both_flavours_honour_the_velocity_feed_forward_of_a_moving_target() {
+    for flavor in [Flavor::Px4, Flavor::ArduPilot] {
+        let mut m = MockAutopilot::new(MockConfig::new(flavor), 0.0);
+        let t = match flavor {
+            Flavor::Px4 => {
+                let t = stream(&mut m, 0.0, 1.5, Some([0.0, 0.0, -10.0]));
+                set_mode(&mut m, t, Mode::Offboard);
+                arm(&mut m, t);
+                stream(&mut m, t, t + 15.0, Some([0.0, 0.0, -10.0]))
+            }
+            Flavor::ArduPilot => {
+                set_mode(&mut m, 0.0, Mode::Guided);
+                arm(&mut m, 0.0);
+                m.handle(
+                    0.0,
+                    &GCS,
+                    &cmd(
+                        MavCmd::MAV_CMD_NAV_TAKEOFF,
+                        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0],
+                    ),
+                );
+                stream(&mut m, 0.0, 10.0, None)
+            }
+        };
+        // 4 m/s north-east: with the feed-forward the vehicle rides on the target; the same
+        // targets sent as position only leave it trailing by speed / gain.
+        let trail = follow_moving_target(&mut m, t, 20.0, [4.0, 3.0]);
+        assert!(trail < 0.5, "{flavor}: trails a moving target by {trail} m");
+    }
+}
