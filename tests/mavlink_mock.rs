@@ -111,7 +111,7 @@ async fn ardupilot_guided_flight_and_gcs_failsafe() {
     expect_failsafe(&link, &mut rx, Mode::ReturnToLaunch).await;
     link.pause_heartbeat(false);
     link.hold().await.unwrap();
-    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+    assert_eq!(mock.with(|m| m.mode()), Mode::Brake);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -129,7 +129,7 @@ async fn serial_flight(flavor: Flavor) {
         .any(|e| matches!(e, MockEvent::Failsafe { .. })));
     link.pause_heartbeat(false);
     link.hold().await.unwrap();
-    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+    assert_eq!(mock.with(|m| m.mode()), Mode::hold_for(flavor));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -61,6 +61,14 @@ pub enum LinkError {
         /// The vehicle's answer.
         result: MavResult,
     },
+    /// The vehicle kept refusing to arm until the takeoff's time was up.
+    #[error("MAV_CMD_COMPONENT_ARM_DISARM refused by the vehicle for {seconds:.0} s; its last reason: {reason}")]
+    NotReadyToArm {
+        /// What the vehicle said last (its STATUSTEXT), or its COMMAND_ACK result.
+        reason: String,
+        /// How long arming was retried, s.
+        seconds: f64,
+    },
     /// The firmware has no such mode.
     #[error("{flavor} has no mode {mode:?}")]
     NoSuchMode {
@@ -662,6 +670,40 @@ impl VehicleLink {
     }
 
     /// Arms (MAV_CMD_COMPONENT_ARM_DISARM, param1 = 1) and waits for the armed heartbeat.
+    /// Arms, retrying while the vehicle refuses (an estimator still settling after boot:
+    /// ArduCopter refuses for ~40 s with "Arm: Need Position Estimate") until `timeout`,
+    /// saying each refusal's reason; the error carries the vehicle's last reason.
+    pub async fn arm_when_ready(&self, timeout: Duration) -> Result<(), LinkError> {
+        let until = Instant::now() + timeout;
+        let mut texts = self.events();
+        loop {
+            let refusal = match self.arm().await {
+                Ok(()) => return Ok(()),
+                Err(LinkError::Refused { result, .. }) => format!("{result:?}"),
+                Err(e) => return Err(e),
+            };
+            // The vehicle's own words, when it said any (STATUSTEXT around the refusal).
+            let mut reason = refusal;
+            while let Ok(ev) = texts.try_recv() {
+                if let LinkEvent::Text(t) = ev {
+                    reason = t;
+                }
+            }
+            let left = until
+                .saturating_duration_since(Instant::now())
+                .as_secs_f64();
+            if left <= 0.0 {
+                return Err(LinkError::NotReadyToArm {
+                    reason,
+                    seconds: timeout.as_secs_f64(),
+                });
+            }
+            tracing::warn!("the vehicle refuses to arm: {reason}; retrying ({left:.0} s left)");
+            tokio::time::sleep(Duration::from_secs(2).min(Duration::from_secs_f64(left))).await;
+        }
+    }
+
+    /// Arms once.
     pub async fn arm(&self) -> Result<(), LinkError> {
         self.command(
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
@@ -774,11 +816,11 @@ impl VehicleLink {
                 self.set_setpoint(above, 0.0)?;
                 tokio::time::sleep(Duration::from_millis(1200)).await;
                 self.set_mode(Mode::Offboard).await?;
-                self.arm().await?;
+                self.arm_when_ready(timeout).await?;
             }
             Flavor::ArduPilot => {
                 self.set_mode(Mode::Guided).await?;
-                self.arm().await?;
+                self.arm_when_ready(timeout).await?;
                 self.command(
                     MavCmd::MAV_CMD_NAV_TAKEOFF,
                     [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, altitude_m as f32],
@@ -802,14 +844,19 @@ impl VehicleLink {
         Ok(())
     }
 
-    /// Clean stop: hold position (PX4 AUTO.LOITER; ArduPilot LOITER, else BRAKE) and stop
+    /// Clean stop: hold position and altitude (PX4 AUTO.LOITER; ArduPilot BRAKE, else
+    /// GUIDED at the current position: its LOITER descends without RC throttle) and stop
     /// streaming.
     pub async fn hold(&self) -> Result<(), LinkError> {
-        let r = self.set_mode(Mode::Hold).await;
-        let r = match (r, self.flavor()) {
-            (Err(_), Flavor::ArduPilot) => self.set_mode(Mode::Brake).await,
-            (r, _) => r,
-        };
+        let flavor = self.flavor();
+        let r = self.set_mode(Mode::hold_for(flavor)).await;
+        if r.is_err() && flavor == Flavor::ArduPilot {
+            // BRAKE refused: GUIDED at the current position also holds altitude without RC.
+            if let Some(p) = self.position_enu() {
+                self.set_setpoint(p, 0.0)?;
+                return self.set_mode(Mode::Guided).await;
+            }
+        }
         *self.streamer.target_ned.lock().expect("streamer poisoned") = None;
         r
     }

@@ -123,6 +123,16 @@ pub mod copter {
 }
 
 impl Mode {
+    /// The mode that holds the vehicle where it is, altitude included, whatever the RC
+    /// does: PX4's AUTO.LOITER; ArduCopter's BRAKE (its LOITER reads the pilot's throttle
+    /// and, with no RC or a lost one, descends to the ground: seen in SITL).
+    pub fn hold_for(flavor: Flavor) -> Mode {
+        match flavor {
+            Flavor::Px4 => Mode::Hold,
+            Flavor::ArduPilot => Mode::Brake,
+        }
+    }
+
     /// HEARTBEAT.custom_mode for this mode on `flavor`; `None` if the firmware has no such mode.
     pub fn custom_mode(&self, flavor: Flavor) -> Option<u32> {
         use Mode::*;

@@ -137,6 +137,13 @@ pub struct DaemonConfig {
     pub connect_timeout_s: f64,
     /// Seconds allowed for the takeoff to reach the agent's altitude.
     pub takeoff_timeout_s: f64,
+    /// Tracking begins once the vehicle is within this distance of the start point and
+    /// slower than this many m/s; default: 1 % of the altitude, at least 0.05 m.
+    pub start_tolerance_m: Option<f64>,
+    /// A vehicle that stays within ten tolerances of the start point this long without
+    /// settling (a real autopilot's position loop hunts by a few centimetres) begins
+    /// tracking anyway, with a warning, s.
+    pub start_settle_s: f64,
     /// The target counts as lost after this long without a measurement, s.
     pub target_lost_after_s: f64,
     /// What to do while the target is lost: `eer` (keep the EER search), `lawn` (lawnmower
@@ -165,6 +172,8 @@ impl Default for DaemonConfig {
             setpoint_hz: 20.0,
             connect_timeout_s: 10.0,
             takeoff_timeout_s: 30.0,
+            start_tolerance_m: None,
+            start_settle_s: 5.0,
             target_lost_after_s: 10.0,
             target_lost_fallback: "eer".into(),
             guidance_budget_ms: 300.0,
@@ -407,6 +416,13 @@ impl Config {
     pub fn default_lab() -> Self {
         Self::from_toml_str(DEFAULT_TOML, Path::new("<embedded config/default.toml>"))
             .expect("the embedded default config is valid (checked by a unit test)")
+    }
+
+    /// The start-point gate: distance (m) and speed (m/s) below which tracking begins.
+    pub fn start_tolerance_m(&self) -> f64 {
+        self.daemon
+            .start_tolerance_m
+            .unwrap_or((0.01 * self.agent.altitude_m).max(0.05))
     }
 
     /// Filter period dt = 1 / filter_hz, seconds.

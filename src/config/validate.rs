@@ -93,6 +93,7 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     validate_daemon(c)?;
     validate_acquisition(c)?;
     validate_road_sigma(c)?;
+    validate_start_gate(c)?;
 
     for (i, occ) in c.occlusions.iter().enumerate() {
         let key = format!("occlusions[{i}].vertices_enu_m");
@@ -468,6 +469,13 @@ fn validate_daemon(c: &Config) -> Result<(), ConfigError> {
         ));
     }
     Ok(())
+}
+
+fn validate_start_gate(c: &Config) -> Result<(), ConfigError> {
+    if let Some(t) = c.daemon.start_tolerance_m {
+        positive("daemon.start_tolerance_m", t)?;
+    }
+    positive("daemon.start_settle_s", c.daemon.start_settle_s)
 }
 
 fn validate_road_sigma(c: &Config) -> Result<(), ConfigError> {

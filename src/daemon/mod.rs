@@ -466,6 +466,8 @@ async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
     };
     link.set_setpoint(start, 0.0)?;
     let want = start.to_ned();
+    let tol = cfg.start_tolerance_m();
+    let mut close_since: Option<Instant> = None;
     // Not VehicleLink::wait_for: that polls every 20 ms, and the instant tracking begins
     // decides the simulated flights (and the recorded numbers of each seed).
     let until = Instant::now() + Duration::from_secs_f64(d.takeoff_timeout_s);
@@ -475,8 +477,21 @@ async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
                 .hypot(p.y_east_m - want.y_east_m)
                 .hypot(p.z_down_m - want.z_down_m);
             let speed = v.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
-            if off < 0.05 && speed < 0.05 {
+            if off < tol && speed < tol {
                 return Ok(());
+            }
+            if off < 10.0 * tol {
+                let since = *close_since.get_or_insert_with(Instant::now);
+                if since.elapsed().as_secs_f64() >= d.start_settle_s {
+                    tracing::warn!(
+                        "the vehicle hovers {off:.2} m from the start point at {speed:.2} m/s \
+                         and does not settle within daemon.start_tolerance_m = {tol} m; \
+                         tracking begins anyway"
+                    );
+                    return Ok(());
+                }
+            } else {
+                close_since = None;
             }
         }
         if Instant::now() > until {

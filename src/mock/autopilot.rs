@@ -40,6 +40,15 @@ pub struct MockConfig {
     pub estimator_ready_after_s: f64,
     /// Parameter overrides applied over the flavour's defaults.
     pub param_overrides: Vec<(String, f64)>,
+    /// An RC transmitter is on with its throttle centred. Without one (a companion-only
+    /// flight, or RC lost), ArduCopter's pilot-controlled modes read the throttle at its
+    /// minimum: in LOITER (and ALT_HOLD) the copter descends to the ground, as its SITL
+    /// does ("SIM Hit ground at 2.5 m/s" after a switch to LOITER at 45 m).
+    pub rc_throttle_centred: bool,
+    /// Amplitude of a hover that never settles, m: the reported position circles the true
+    /// one at 0.5 Hz, as a real position loop hunts (PX4 SIH never came closer than 0.08 m
+    /// to a setpoint nor slower than 0.08 m/s). 0: the kinematic model's exact settling.
+    pub hover_wander_m: f64,
 }
 
 impl MockConfig {
@@ -55,6 +64,8 @@ impl MockConfig {
             origin_alt_m: 30.0,
             estimator_ready_after_s: 0.0,
             param_overrides: Vec::new(),
+            rc_throttle_centred: false,
+            hover_wander_m: 0.0,
         }
     }
 }
@@ -286,6 +297,30 @@ impl MockAutopilot {
         };
         if mode != Mode::Guided {
             self.takeoff_alt_m = None;
+        }
+    }
+
+    /// The reported position's hunting around the true one (north, east) and its rate.
+    fn hover_wander(&self) -> ([f64; 2], [f64; 2]) {
+        let a = self.cfg.hover_wander_m;
+        if a == 0.0 || !self.armed {
+            return ([0.0; 2], [0.0; 2]);
+        }
+        let w = std::f64::consts::TAU * 0.5;
+        let (s, c) = (w * self.now_s).sin_cos();
+        ([a * s, a * c], [a * w * c, -a * w * s])
+    }
+
+    /// ArduCopter's LOITER with the throttle at its minimum (no RC) descends at the
+    /// descent limit until it lands.
+    fn descend_without_throttle(&mut self) {
+        if self.cfg.flavor == Flavor::ArduPilot
+            && self.mode == Mode::Hold
+            && !self.cfg.rc_throttle_centred
+        {
+            if let Some(t) = self.target_ned_m.as_mut() {
+                t[2] = 0.0;
+            }
         }
     }
 
@@ -640,6 +675,7 @@ impl MockAutopilot {
             if dt > 0.0 {
                 let limits = self.limits();
                 self.advance_moving_target(dt);
+                self.descend_without_throttle();
                 self.state
                     .step(self.target_ned_m, self.target_vel_ned_mps, &limits, dt);
             }
@@ -794,13 +830,14 @@ impl MockAutopilot {
                         ..Default::default()
                     }));
                 }
+                let (dp, dv) = self.hover_wander();
                 MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
                     time_boot_ms: t,
-                    x: s.pos_ned_m[0] as f32,
-                    y: s.pos_ned_m[1] as f32,
+                    x: (s.pos_ned_m[0] + dp[0]) as f32,
+                    y: (s.pos_ned_m[1] + dp[1]) as f32,
                     z: s.pos_ned_m[2] as f32,
-                    vx: s.vel_ned_mps[0] as f32,
-                    vy: s.vel_ned_mps[1] as f32,
+                    vx: (s.vel_ned_mps[0] + dv[0]) as f32,
+                    vy: (s.vel_ned_mps[1] + dv[1]) as f32,
                     vz: s.vel_ned_mps[2] as f32,
                 })
             }
