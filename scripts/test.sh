@@ -7,3 +7,5 @@ bash scripts/setup.sh
 cargo fmt --all -- --check
 cargo clippy --release --all-targets -- -D warnings
 cargo test --release --all-targets
+# The real autopilots (SITL), when their builds are beside the project.
+bash scripts/sitl-test.sh

@@ -674,19 +674,41 @@ impl VehicleLink {
     /// ArduCopter refuses for ~40 s with "Arm: Need Position Estimate") until `timeout`,
     /// saying each refusal's reason; the error carries the vehicle's last reason.
     pub async fn arm_when_ready(&self, timeout: Duration) -> Result<(), LinkError> {
+        self.arm_in_mode_when_ready(None, timeout).await
+    }
+
+    /// [`Self::arm_when_ready`], entering `mode` again before each attempt when the vehicle
+    /// is not in it: ArduCopter SITL drops a GUIDED set during its boot back to STABILIZE,
+    /// and a takeoff from there is refused.
+    pub async fn arm_in_mode_when_ready(
+        &self,
+        mode: Option<Mode>,
+        timeout: Duration,
+    ) -> Result<(), LinkError> {
         let until = Instant::now() + timeout;
-        let mut texts = self.events();
         loop {
+            if let Some(m) = mode {
+                if self.state().mode != Some(m) {
+                    if let Err(e) = self.set_mode(m).await {
+                        tracing::warn!("the vehicle refuses {m:?}: {e}; retrying");
+                    }
+                }
+            }
+            // Subscribed afresh for each attempt: what the vehicle says around this refusal.
+            let mut texts = self.events();
             let refusal = match self.arm().await {
                 Ok(()) => return Ok(()),
                 Err(LinkError::Refused { result, .. }) => format!("{result:?}"),
                 Err(e) => return Err(e),
             };
-            // The vehicle's own words, when it said any (STATUSTEXT around the refusal).
+            // The vehicle's own words, when it said any (STATUSTEXT around the refusal);
+            // telemetry events may have overrun the receiver: skip what was lost.
             let mut reason = refusal;
-            while let Ok(ev) = texts.try_recv() {
-                if let LinkEvent::Text(t) = ev {
-                    reason = t;
+            loop {
+                match texts.try_recv() {
+                    Ok(LinkEvent::Text(t)) => reason = t,
+                    Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => {}
+                    Err(_) => break,
                 }
             }
             let left = until
@@ -820,7 +842,11 @@ impl VehicleLink {
             }
             Flavor::ArduPilot => {
                 self.set_mode(Mode::Guided).await?;
-                self.arm_when_ready(timeout).await?;
+                self.arm_in_mode_when_ready(Some(Mode::Guided), timeout)
+                    .await?;
+                if self.state().mode != Some(Mode::Guided) {
+                    self.set_mode(Mode::Guided).await?;
+                }
                 self.command(
                     MavCmd::MAV_CMD_NAV_TAKEOFF,
                     [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, altitude_m as f32],
