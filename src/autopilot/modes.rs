@@ -21,15 +21,18 @@ impl fmt::Display for Flavor {
     }
 }
 
+/// A flavour name that names no firmware.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown autopilot flavour `{0}` (expected px4 or ardupilot)")]
+pub struct UnknownFlavor(pub String);
+
 impl std::str::FromStr for Flavor {
-    type Err = String;
+    type Err = UnknownFlavor;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "px4" => Ok(Self::Px4),
             "ardupilot" => Ok(Self::ArduPilot),
-            other => Err(format!(
-                "unknown autopilot flavour `{other}` (expected px4 or ardupilot)"
-            )),
+            other => Err(UnknownFlavor(other.to_string())),
         }
     }
 }

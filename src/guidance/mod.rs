@@ -61,15 +61,18 @@ impl fmt::Display for GuidanceKind {
     }
 }
 
+/// A guidance-law name that names none.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown guidance law `{0}` (expected one of eer, pfwm, lawn, kf, truth)")]
+pub struct UnknownGuidance(pub String);
+
 impl FromStr for GuidanceKind {
-    type Err = String;
+    type Err = UnknownGuidance;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         Self::ALL
             .iter()
             .find(|g| g.as_str() == s.trim())
             .copied()
-            .ok_or_else(|| {
-                format!("unknown guidance law `{s}` (expected one of eer, pfwm, lawn, kf, truth)")
-            })
+            .ok_or_else(|| UnknownGuidance(s.to_string()))
     }
 }
