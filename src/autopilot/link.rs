@@ -154,6 +154,18 @@ impl LinkConfig {
 type SharedTlog = Option<Arc<super::tlog::Tlog>>;
 type SharedState = Arc<Mutex<VehicleState>>;
 
+/// The newest STATUSTEXT waiting in `rx`, into `said` (events lost to a lagging receiver
+/// are skipped).
+fn latest_text(rx: &mut broadcast::Receiver<LinkEvent>, said: &mut Option<String>) {
+    loop {
+        match rx.try_recv() {
+            Ok(LinkEvent::Text(t)) => *said = Some(t),
+            Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => {}
+            Err(_) => return,
+        }
+    }
+}
+
 /// The reader: every message into the tlog and the vehicle state; a dead stream reopened.
 fn spawn_reader(
     conn: Arc<Connection>,
@@ -686,6 +698,10 @@ impl VehicleLink {
         timeout: Duration,
     ) -> Result<(), LinkError> {
         let until = Instant::now() + timeout;
+        // One subscription for the whole wait: the vehicle's reason may come just before or
+        // just after its COMMAND_ACK (the mock sends it after; the firmwares queue it).
+        let mut texts = self.events();
+        let mut said: Option<String> = None;
         loop {
             if let Some(m) = mode {
                 if self.state().mode != Some(m) {
@@ -694,23 +710,15 @@ impl VehicleLink {
                     }
                 }
             }
-            // Subscribed afresh for each attempt: what the vehicle says around this refusal.
-            let mut texts = self.events();
             let refusal = match self.arm().await {
                 Ok(()) => return Ok(()),
                 Err(LinkError::Refused { result, .. }) => format!("{result:?}"),
                 Err(e) => return Err(e),
             };
-            // The vehicle's own words, when it said any (STATUSTEXT around the refusal);
-            // telemetry events may have overrun the receiver: skip what was lost.
-            let mut reason = refusal;
-            loop {
-                match texts.try_recv() {
-                    Ok(LinkEvent::Text(t)) => reason = t,
-                    Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => {}
-                    Err(_) => break,
-                }
-            }
+            // Time for a STATUSTEXT that follows the ACK.
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            latest_text(&mut texts, &mut said);
+            let reason = said.clone().unwrap_or(refusal);
             let left = until
                 .saturating_duration_since(Instant::now())
                 .as_secs_f64();
@@ -722,6 +730,8 @@ impl VehicleLink {
             }
             tracing::warn!("the vehicle refuses to arm: {reason}; retrying ({left:.0} s left)");
             tokio::time::sleep(Duration::from_secs(2).min(Duration::from_secs_f64(left))).await;
+            // A new attempt: only what the vehicle says from now on counts as its reason.
+            latest_text(&mut texts, &mut None);
         }
     }
 

@@ -185,19 +185,8 @@ impl ParticleFilter {
             self.redraw_uniform(rng);
             return;
         }
-        let k = self.params.history_len;
         for i in 0..self.weights.len() {
-            let Some((p, dir)) = road.sample_on_roads(region, rng) else {
-                continue;
-            };
-            let speed = rng.gen_range(speeds_mps.clone());
-            let v_step = dir * speed * self.params.dt_s;
-            let tr = self.histories.track_mut(i);
-            for t in 0..k {
-                let q = p - v_step * (k - 1 - t) as f64;
-                tr[2 * t] = q.x;
-                tr[2 * t + 1] = q.y;
-            }
+            self.seed_on_roads(i, world, region, speeds_mps.clone(), rng);
         }
         let n = self.weights.len();
         self.weights.fill(1.0 / n as f64);
@@ -236,24 +225,40 @@ impl ParticleFilter {
         if count == 0 || road.length_within(region) <= 0.0 {
             return;
         }
-        let k = self.params.history_len;
         let w = 1.0 / n as f64;
         for _ in 0..count.min(n) {
             let i = rng.gen_range(0..n);
-            let Some((p, dir)) = road.sample_on_roads(region, rng) else {
+            if !self.seed_on_roads(i, world, region, speeds_mps.clone(), rng) {
                 return;
-            };
-            let speed = rng.gen_range(speeds_mps.clone());
-            let v_step = dir * speed * self.params.dt_s;
-            let tr = self.histories.track_mut(i);
-            for t in 0..k {
-                let q = p - v_step * (k - 1 - t) as f64;
-                tr[2 * t] = q.x;
-                tr[2 * t + 1] = q.y;
             }
             self.weights[i] = w;
         }
         self.normalize();
+    }
+
+    /// Particle `i` becomes a straight track along a road within `region`, ending at a point
+    /// drawn on the roads, at a speed drawn from `speeds_mps`; false when no road is there.
+    fn seed_on_roads<R: Rng + ?Sized>(
+        &mut self,
+        i: usize,
+        world: &World,
+        region: Option<(Enu2, f64)>,
+        speeds_mps: std::ops::RangeInclusive<f64>,
+        rng: &mut R,
+    ) -> bool {
+        let Some((p, dir)) = world.road.sample_on_roads(region, rng) else {
+            return false;
+        };
+        let k = self.params.history_len;
+        let speed = rng.gen_range(speeds_mps);
+        let v_step = dir * speed * self.params.dt_s;
+        let tr = self.histories.track_mut(i);
+        for t in 0..k {
+            let q = p - v_step * (k - 1 - t) as f64;
+            tr[2 * t] = q.x;
+            tr[2 * t + 1] = q.y;
+        }
+        true
     }
 
     /// Starts over with no information: on the roads or over the workspace (see

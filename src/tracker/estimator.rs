@@ -79,6 +79,15 @@ impl Estimator {
         }
     }
 
+    /// The largest standard deviation of the estimate, m.
+    pub fn largest_sd_m(&self) -> f64 {
+        self.covariance()
+            .symmetric_eigenvalues()
+            .max()
+            .max(0.0)
+            .sqrt()
+    }
+
     /// The estimate's velocity, world ENU, m/s.
     pub fn velocity(&self) -> Enu2 {
         match self {

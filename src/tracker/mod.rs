@@ -411,13 +411,7 @@ impl Tracker {
             return;
         }
         let v_max = self.params.filter.init_speed_max_mps;
-        let sd = self
-            .estimator
-            .covariance()
-            .symmetric_eigenvalues()
-            .max()
-            .max(0.0)
-            .sqrt();
+        let sd = self.estimator.largest_sd_m();
         let region = Some((self.estimator.mean(), 2.0 * sd + v_max));
         let speeds = self.hypothesis_speeds();
         let count = (share * self.params.filter.particles as f64).round() as usize;
@@ -544,14 +538,7 @@ impl Tracker {
     /// zero while it is spread out, when a mean velocity means nothing.
     fn confident_velocity(&self) -> Enu2 {
         let fp = &self.world.footprint;
-        let sigma = self
-            .estimator
-            .covariance()
-            .symmetric_eigenvalues()
-            .max()
-            .max(0.0)
-            .sqrt();
-        if sigma <= 0.5 * fp.half_width_m.min(fp.half_height_m) {
+        if self.estimator.largest_sd_m() <= 0.5 * fp.half_width_m.min(fp.half_height_m) {
             self.estimator.velocity()
         } else {
             Enu2::zeros()
