@@ -13,6 +13,7 @@ use thiserror::Error;
 use crate::motion::{Histories, MotionError, MotionModel};
 use crate::world::geometry::{BoundsEnu, Enu2};
 use crate::world::measurement::Gaussian2;
+use crate::world::road::RoadPieces;
 use crate::world::World;
 
 /// Why a filter step failed.
@@ -180,13 +181,17 @@ impl ParticleFilter {
         rng: &mut R,
     ) {
         let road = &world.road;
-        let region = region.filter(|r| road.length_within(Some(*r)) > 0.0);
-        if road.length_within(region) <= 0.0 {
+        let mut roads = road.roads_within(region);
+        if roads.length_m() <= 0.0 {
+            // No road in the region: the whole network.
+            roads = road.roads_within(None);
+        }
+        if roads.length_m() <= 0.0 {
             self.redraw_uniform(rng);
             return;
         }
         for i in 0..self.weights.len() {
-            self.seed_on_roads(i, world, region, speeds_mps.clone(), rng);
+            self.seed_on_roads(i, &roads, speeds_mps.clone(), rng);
         }
         let n = self.weights.len();
         self.weights.fill(1.0 / n as f64);
@@ -220,15 +225,22 @@ impl ParticleFilter {
         rng: &mut R,
     ) {
         let road = &world.road;
-        let region = region.filter(|r| road.length_within(Some(*r)) > 0.0);
         let n = self.weights.len();
-        if count == 0 || road.length_within(region) <= 0.0 {
+        if count == 0 {
+            return;
+        }
+        let mut roads = road.roads_within(region);
+        if roads.length_m() <= 0.0 {
+            // No road in the region: the whole network.
+            roads = road.roads_within(None);
+        }
+        if roads.length_m() <= 0.0 {
             return;
         }
         let w = 1.0 / n as f64;
         for _ in 0..count.min(n) {
             let i = rng.gen_range(0..n);
-            if !self.seed_on_roads(i, world, region, speeds_mps.clone(), rng) {
+            if !self.seed_on_roads(i, &roads, speeds_mps.clone(), rng) {
                 return;
             }
             self.weights[i] = w;
@@ -236,17 +248,16 @@ impl ParticleFilter {
         self.normalize();
     }
 
-    /// Particle `i` becomes a straight track along a road within `region`, ending at a point
-    /// drawn on the roads, at a speed drawn from `speeds_mps`; false when no road is there.
+    /// Particle `i` becomes a straight track along one of `roads`, ending at a point drawn
+    /// on them, at a speed drawn from `speeds_mps`; false when there is no road.
     fn seed_on_roads<R: Rng + ?Sized>(
         &mut self,
         i: usize,
-        world: &World,
-        region: Option<(Enu2, f64)>,
+        roads: &RoadPieces,
         speeds_mps: std::ops::RangeInclusive<f64>,
         rng: &mut R,
     ) -> bool {
-        let Some((p, dir)) = world.road.sample_on_roads(region, rng) else {
+        let Some((p, dir)) = roads.sample(rng) else {
             return false;
         };
         let k = self.params.history_len;

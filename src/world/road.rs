@@ -130,22 +130,14 @@ impl RoadNetwork {
         region: Option<(Enu2, f64)>,
         rng: &mut R,
     ) -> Option<(Enu2, Enu2)> {
+        self.roads_within(region).sample(rng)
+    }
+
+    /// The roads within `region`, clipped once, to draw many points from.
+    pub fn roads_within(&self, region: Option<(Enu2, f64)>) -> RoadPieces {
         let pieces = self.pieces_within(region);
-        let total: f64 = pieces.iter().map(|(a, b)| (b - a).norm()).sum();
-        if total.is_nan() || total <= 0.0 {
-            return None;
-        }
-        let mut u = rng.gen_range(0.0..total);
-        for (a, b) in &pieces {
-            let len = (b - a).norm();
-            if u <= len {
-                let dir = (b - a) / len;
-                return Some((a + dir * u, dir));
-            }
-            u -= len;
-        }
-        let (a, b) = pieces.last()?;
-        Some((*b, (b - a).normalize()))
+        let total = pieces.iter().map(|(a, b)| (b - a).norm()).sum();
+        RoadPieces { pieces, total }
     }
 
     /// Total length of road within `region`, m.
@@ -180,6 +172,39 @@ impl RoadNetwork {
                     .map(move |&(to, _)| (n.position_enu, self.nodes[to].position_enu))
             })
             .collect()
+    }
+}
+
+/// Road segments (each in its edge's direction) and their total length, m.
+#[derive(Debug, Clone)]
+pub struct RoadPieces {
+    pieces: Vec<(Enu2, Enu2)>,
+    total: f64,
+}
+
+impl RoadPieces {
+    /// Total length, m.
+    pub fn length_m(&self) -> f64 {
+        self.total
+    }
+
+    /// A point drawn uniformly by length and the unit direction of its road; `None` when
+    /// there is no road.
+    pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> Option<(Enu2, Enu2)> {
+        if self.total.is_nan() || self.total <= 0.0 {
+            return None;
+        }
+        let mut u = rng.gen_range(0.0..self.total);
+        for (a, b) in &self.pieces {
+            let len = (b - a).norm();
+            if u <= len {
+                let dir = (b - a) / len;
+                return Some((a + dir * u, dir));
+            }
+            u -= len;
+        }
+        let (a, b) = self.pieces.last()?;
+        Some((*b, (b - a).normalize()))
     }
 }
 
