@@ -186,15 +186,84 @@ impl ParticleFilter {
             // No road in the region: the whole network.
             roads = road.roads_within(None);
         }
+        self.spread_on_pieces(&roads, speeds_mps, rng);
+    }
+
+    /// Starts over on `roads` (drawn by weighted length, moving along their direction at
+    /// speeds from `speeds_mps`); over the workspace when they are empty.
+    pub fn spread_on_pieces<R: Rng + ?Sized>(
+        &mut self,
+        roads: &RoadPieces,
+        speeds_mps: std::ops::RangeInclusive<f64>,
+        rng: &mut R,
+    ) {
         if roads.length_m() <= 0.0 {
             self.redraw_uniform(rng);
             return;
         }
         for i in 0..self.weights.len() {
-            self.seed_on_roads(i, &roads, speeds_mps.clone(), rng);
+            self.seed_on_roads(i, roads, speeds_mps.clone(), rng);
         }
         let n = self.weights.len();
         self.weights.fill(1.0 / n as f64);
+    }
+
+    /// Replaces up to `count` particles drawn at random by road-following clones of
+    /// particles drawn by weight: each clone is its source moved along the roads (the
+    /// allowed directions, the turns drawn by their probabilities) by up to one step at the
+    /// source's own speed, and keeps that speed along its new road. Only sources within a
+    /// step of a junction are cloned (elsewhere a clone would duplicate its source and keep
+    /// alive what negative information is removing). A constant-velocity
+    /// particle drives straight on through a junction; its clones take the other branches
+    /// too, in proportion to the belief, so what the agent has already ruled out stays
+    /// ruled out. Nothing without roads.
+    pub fn inject_road_followers<R: Rng + ?Sized>(
+        &mut self,
+        world: &World,
+        count: usize,
+        rng: &mut R,
+    ) {
+        let n = self.weights.len();
+        let k = self.params.history_len;
+        if count == 0 || n == 0 || k < 2 || world.road.nodes.is_empty() {
+            return;
+        }
+        let dt = self.params.dt_s;
+        let sources: Vec<usize> = (0..count.min(n))
+            .map(|_| self.draw_by_weight(rng))
+            .collect();
+        for j in sources {
+            let p = self.histories.newest(j);
+            let v = (p - self.histories.at(j, k - 2)) / dt;
+            let speed = v.norm();
+            if !speed.is_finite() {
+                continue;
+            }
+            let roads = world.road.reachable_from(&p, Some(v), (0.0, speed * dt));
+            if roads.pieces().count() < 2 {
+                // No junction within the step: a clone would only duplicate its source.
+                continue;
+            }
+            let i = rng.gen_range(0..n);
+            let w = self.weights[j];
+            if self.seed_on_roads(i, &roads, speed..=speed, rng) {
+                self.weights[i] = w;
+            }
+        }
+        self.normalize();
+    }
+
+    /// An index drawn with probability proportional to its weight.
+    fn draw_by_weight<R: Rng + ?Sized>(&self, rng: &mut R) -> usize {
+        let total: f64 = self.weights.iter().sum();
+        let mut u = rng.gen_range(0.0..total.max(f64::MIN_POSITIVE));
+        for (i, w) in self.weights.iter().enumerate() {
+            if u < *w {
+                return i;
+            }
+            u -= w;
+        }
+        self.weights.len() - 1
     }
 
     /// Weighted mean velocity, world ENU, m/s: each particle's motion over its last (up to)
@@ -225,7 +294,6 @@ impl ParticleFilter {
         rng: &mut R,
     ) {
         let road = &world.road;
-        let n = self.weights.len();
         if count == 0 {
             return;
         }
@@ -234,13 +302,26 @@ impl ParticleFilter {
             // No road in the region: the whole network.
             roads = road.roads_within(None);
         }
-        if roads.length_m() <= 0.0 {
+        self.inject_on_pieces(&roads, count, speeds_mps, rng);
+    }
+
+    /// Replaces `count` particles drawn at random by hypotheses on `roads` (see
+    /// [`Self::spread_on_pieces`]) with the mean weight; nothing when `roads` is empty.
+    pub fn inject_on_pieces<R: Rng + ?Sized>(
+        &mut self,
+        roads: &RoadPieces,
+        count: usize,
+        speeds_mps: std::ops::RangeInclusive<f64>,
+        rng: &mut R,
+    ) {
+        let n = self.weights.len();
+        if count == 0 || roads.length_m() <= 0.0 {
             return;
         }
         let w = 1.0 / n as f64;
         for _ in 0..count.min(n) {
             let i = rng.gen_range(0..n);
-            if !self.seed_on_roads(i, &roads, speeds_mps.clone(), rng) {
+            if !self.seed_on_roads(i, roads, speeds_mps.clone(), rng) {
                 return;
             }
             self.weights[i] = w;

@@ -31,6 +31,9 @@ use crate::motion::{self, MotionError, MotionParams};
 use crate::rng::CoreRng;
 use crate::world::World;
 
+/// How far back the measured track reaches for the target's last seen velocity, s.
+const MEASURED_TRACK_S: f64 = 3.0;
+
 /// What to do while the target is lost.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LostFallback {
@@ -173,6 +176,10 @@ pub struct Tracker {
     respread_done: bool,
     /// The estimate's speed at the last step with a measurement, m/s.
     last_seen_speed_mps: f64,
+    /// The estimate's velocity then, world ENU, m/s (which way the target was driving).
+    last_seen_velocity_enu: Enu2,
+    /// The measurements of the last [`MEASURED_TRACK_S`] seconds, oldest first.
+    recent_measurements: std::collections::VecDeque<(f64, Enu2)>,
 }
 
 impl Tracker {
@@ -221,6 +228,8 @@ impl Tracker {
             last_eer: f64::NAN,
             respread_done: false,
             last_seen_speed_mps: 0.0,
+            last_seen_velocity_enu: Enu2::zeros(),
+            recent_measurements: std::collections::VecDeque::new(),
         })
     }
 
@@ -302,7 +311,7 @@ impl Tracker {
             self.last_frame_s = t_s;
         }
         if let Some(z) = z {
-            self.last_measurement = Some((t_s, z));
+            self.remember_measurement(t_s, z);
         }
         let started = clock.now_s();
         let stepped = if frame {
@@ -323,7 +332,8 @@ impl Tracker {
         if z.is_some() {
             self.last_seen_s = t_s;
             self.respread_done = false;
-            self.last_seen_speed_mps = self.estimator.velocity().norm();
+            self.last_seen_velocity_enu = self.measured_velocity();
+            self.last_seen_speed_mps = self.last_seen_velocity_enu.norm();
         } else {
             self.respread_if_long_unseen(t_s);
             self.inject_where_it_can_be();
@@ -360,6 +370,34 @@ impl Tracker {
         })
     }
 
+    fn remember_measurement(&mut self, t_s: f64, z: Enu2) {
+        self.last_measurement = Some((t_s, z));
+        self.recent_measurements.push_back((t_s, z));
+        while self
+            .recent_measurements
+            .front()
+            .is_some_and(|(t, _)| t_s - t > MEASURED_TRACK_S)
+        {
+            self.recent_measurements.pop_front();
+        }
+    }
+
+    /// The target's velocity as its measurements of the last [`MEASURED_TRACK_S`] seconds
+    /// show it (first to last), when they span at least half that; else the estimate's.
+    /// After a re-seed a particle filter's velocity starts again from zero, and the speed
+    /// the re-spread bands are drawn with must not: measured motion is what the target did.
+    fn measured_velocity(&self) -> Enu2 {
+        match (
+            self.recent_measurements.front(),
+            self.recent_measurements.back(),
+        ) {
+            (Some((t0, z0)), Some((t1, z1))) if t1 - t0 >= 0.5 * MEASURED_TRACK_S => {
+                (z1 - z0) / (t1 - t0)
+            }
+            _ => self.estimator.velocity(),
+        }
+    }
+
     /// The speeds new hypotheses get: around the speed the target had when last seen (a
     /// car keeps its speed through a junction it cannot be seen at), or any speed the
     /// motion model allows when it was not moving or never seen.
@@ -374,9 +412,11 @@ impl Tracker {
     }
 
     /// After `respread_after_s` without a measurement, once per such spell: the particles
-    /// go back on the roads the target can have reached since it was last seen (within
-    /// the largest speed times the time since, around the last measurement; around the cue
-    /// if it was never seen; anywhere without either).
+    /// go back on the roads the target can have driven to since it was last seen (forward
+    /// along the road graph from the last measurement, see [`Self::reachable_since_seen`]);
+    /// around the cue if it was never seen (within the largest speed times the time
+    /// since); anywhere without either. A disc around the last measurement would put half
+    /// the belief behind the target and on roads it cannot have reached.
     fn respread_if_long_unseen(&mut self, t_s: f64) {
         let Some(after) = self.params.respread_after_s else {
             return;
@@ -387,20 +427,47 @@ impl Tracker {
         self.respread_done = true;
         let speeds = self.hypothesis_speeds();
         let v_far = *speeds.end();
+        let reachable = self.reachable_since_seen(t_s);
         let region = match self.last_measurement {
             Some((tm, zm)) => Some((zm, v_far * (t_s - tm))),
             None => self.params.cue.map(|(c, r)| (c, r + v_far * t_s)),
         };
         if let Estimator::Particle { pf, .. } = &mut self.estimator {
-            pf.spread_on_roads_at(&self.world, region, speeds, &mut self.rng_filter);
+            match reachable {
+                Some(roads) => pf.spread_on_pieces(&roads, speeds, &mut self.rng_filter),
+                None => pf.spread_on_roads_at(&self.world, region, speeds, &mut self.rng_filter),
+            }
         }
     }
 
+    /// The roads the target can have driven to since its last measurement, forward along
+    /// the allowed directions from where it was seen heading the way it was going, at the
+    /// speeds of [`Self::hypothesis_speeds`] (plus one filter period of slack for the
+    /// measurement's noise), weighted by the turn probabilities. `None` before the first
+    /// measurement or when no road is reachable: then a disc around it is used.
+    fn reachable_since_seen(&self, t_s: f64) -> Option<crate::world::road::RoadPieces> {
+        let (tm, zm) = self.last_measurement?;
+        let speeds = self.hypothesis_speeds();
+        let elapsed = (t_s - tm).max(0.0);
+        let slack = speeds.end() * self.params.filter.dt_s;
+        let roads = self.world.road.reachable_from(
+            &zm,
+            Some(self.last_seen_velocity_enu),
+            (
+                (speeds.start() * elapsed - slack).max(0.0),
+                speeds.end() * elapsed + slack,
+            ),
+        );
+        (roads.length_m() > 0.0).then_some(roads)
+    }
+
     /// At each step without a measurement, a share of the particles (`injection_share`) is
-    /// replaced by hypotheses on the roads around the current belief (within two standard
-    /// deviations of its mean plus a second at the largest speed): where the motion model
-    /// drives straight on through a junction or a bend, tracks along the other branches are
-    /// there for the next frames to confirm or rule out.
+    /// replaced by hypotheses for the branches a constant-velocity particle cannot take: once
+    /// the target has been seen, road-following clones of the particles within a step of a
+    /// junction (`ParticleFilter::inject_road_followers`: the belief itself, so what the
+    /// agent has ruled out stays ruled out); before that, hypotheses on the roads around
+    /// the belief (within two standard deviations of its mean plus a second at the largest
+    /// speed).
     fn inject_where_it_can_be(&mut self) {
         let share = self.params.injection_share;
         let knows_roads = match &self.estimator {
@@ -415,8 +482,13 @@ impl Tracker {
         let region = Some((self.estimator.mean(), 2.0 * sd + v_max));
         let speeds = self.hypothesis_speeds();
         let count = (share * self.params.filter.particles as f64).round() as usize;
+        let seen = self.last_measurement.is_some();
         if let Estimator::Particle { pf, .. } = &mut self.estimator {
-            pf.inject_on_roads(&self.world, region, count, speeds, &mut self.rng_filter);
+            if seen {
+                pf.inject_road_followers(&self.world, count, &mut self.rng_filter);
+            } else {
+                pf.inject_on_roads(&self.world, region, count, speeds, &mut self.rng_filter);
+            }
         }
     }
 

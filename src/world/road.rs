@@ -137,7 +137,12 @@ impl RoadNetwork {
     pub fn roads_within(&self, region: Option<(Enu2, f64)>) -> RoadPieces {
         let pieces = self.pieces_within(region);
         let total = pieces.iter().map(|(a, b)| (b - a).norm()).sum();
-        RoadPieces { pieces, total }
+        let weights = vec![1.0; pieces.len()];
+        RoadPieces {
+            pieces,
+            weights,
+            total,
+        }
     }
 
     /// Total length of road within `region`, m.
@@ -162,6 +167,114 @@ impl RoadNetwork {
             .collect()
     }
 
+    /// The roads the target can be on after driving a path length in `distance_m` from
+    /// `from`, along the allowed directions, each piece weighted by the probability of the
+    /// turns that lead to it (the product of the transition probabilities on the way).
+    /// `from` is placed on the nearest edge whose direction agrees with `heading` (when
+    /// given and not zero). Empty when there is no road.
+    pub fn reachable_from(
+        &self,
+        from: &Enu2,
+        heading: Option<Enu2>,
+        distance_m: (f64, f64),
+    ) -> RoadPieces {
+        let mut out = RoadPieces {
+            pieces: Vec::new(),
+            weights: Vec::new(),
+            total: 0.0,
+        };
+        let Some((u, v, s0)) = self.nearest_edge(from, heading) else {
+            return out;
+        };
+        self.walk(u, v, s0, 0.0, 1.0, distance_m, 0, &mut out);
+        out.total = out
+            .pieces
+            .iter()
+            .zip(&out.weights)
+            .map(|((a, b), w)| (b - a).norm() * w)
+            .sum();
+        out
+    }
+
+    /// The edge (from-node, to-node indices) nearest to `p` and the distance along it of
+    /// `p`'s projection; edges heading against `heading` count only when no other is near.
+    fn nearest_edge(&self, p: &Enu2, heading: Option<Enu2>) -> Option<(usize, usize, f64)> {
+        let heading = heading.filter(|h| h.norm() > 1e-9).map(|h| h.normalize());
+        let mut best: Option<(f64, (usize, usize, f64))> = None;
+        for (u, node) in self.nodes.iter().enumerate() {
+            for &(v, _) in &node.next {
+                let a = node.position_enu;
+                let d = self.nodes[v].position_enu - a;
+                let len = d.norm();
+                if len <= 1e-9 {
+                    continue;
+                }
+                let dir = d / len;
+                let s = (p - a).dot(&dir).clamp(0.0, len);
+                let mut cost = (a + dir * s - p).norm();
+                if let Some(h) = heading {
+                    // Across or against the heading: as if up to 2 km farther away (a
+                    // 5-degree difference costs 4 m, a crossing road 1 km).
+                    cost += (1.0 - dir.dot(&h)) * 1e3;
+                }
+                if best.map_or(true, |(c, _)| cost < c) {
+                    best = Some((cost, (u, v, s)));
+                }
+            }
+        }
+        best.map(|(_, e)| e)
+    }
+
+    /// Collects the part of edge u->v (from `s0` metres along it, `travelled` metres of path
+    /// behind) that lies within `distance_m` of path, then the edges after it.
+    #[allow(clippy::too_many_arguments)]
+    fn walk(
+        &self,
+        u: usize,
+        v: usize,
+        s0: f64,
+        travelled: f64,
+        probability: f64,
+        distance_m: (f64, f64),
+        depth: usize,
+        out: &mut RoadPieces,
+    ) {
+        // A bound on turns taken: a path through a 1e-6-likely chain of turns, or longer
+        // than any search radius could need, carries nothing worth drawing.
+        if depth > 256 || probability < 1e-6 {
+            return;
+        }
+        let a = self.nodes[u].position_enu;
+        let d = self.nodes[v].position_enu - a;
+        let len = d.norm();
+        let (d_min, d_max) = distance_m;
+        if len > 1e-9 {
+            let dir = d / len;
+            let lo = s0.max(s0 + d_min - travelled);
+            let hi = len.min(s0 + d_max - travelled);
+            if hi - lo > 1e-9 {
+                out.pieces.push((a + dir * lo, a + dir * hi));
+                out.weights.push(probability);
+            }
+        }
+        let at_end = travelled + (len - s0).max(0.0);
+        if at_end >= d_max {
+            return;
+        }
+        for &(w, p) in &self.nodes[v].next {
+            self.walk(
+                v,
+                w,
+                0.0,
+                at_end.max(travelled + 1e-9),
+                probability * p,
+                distance_m,
+                depth + 1,
+                out,
+            );
+        }
+    }
+
     /// Straight edges as pairs of end points (for plots).
     pub fn edges_enu(&self) -> Vec<(Enu2, Enu2)> {
         self.nodes
@@ -175,33 +288,41 @@ impl RoadNetwork {
     }
 }
 
-/// Road segments (each in its edge's direction) and their total length, m.
+/// Road segments (each in its edge's direction), each with a weight per metre, and their
+/// total weighted length.
 #[derive(Debug, Clone)]
 pub struct RoadPieces {
     pieces: Vec<(Enu2, Enu2)>,
+    weights: Vec<f64>,
     total: f64,
 }
 
 impl RoadPieces {
-    /// Total length, m.
+    /// Total weighted length, m (the plain length when every weight is 1).
     pub fn length_m(&self) -> f64 {
         self.total
     }
 
-    /// A point drawn uniformly by length and the unit direction of its road; `None` when
+    /// The segments and their weights per metre.
+    pub fn pieces(&self) -> impl Iterator<Item = (&(Enu2, Enu2), f64)> {
+        self.pieces.iter().zip(self.weights.iter().copied())
+    }
+
+    /// A point drawn by weighted length and the unit direction of its road; `None` when
     /// there is no road.
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> Option<(Enu2, Enu2)> {
         if self.total.is_nan() || self.total <= 0.0 {
             return None;
         }
         let mut u = rng.gen_range(0.0..self.total);
-        for (a, b) in &self.pieces {
+        for ((a, b), w) in self.pieces.iter().zip(&self.weights) {
             let len = (b - a).norm();
-            if u <= len {
+            let mass = len * w;
+            if u <= mass {
                 let dir = (b - a) / len;
-                return Some((a + dir * u, dir));
+                return Some((a + dir * (u / w), dir));
             }
-            u -= len;
+            u -= mass;
         }
         let (a, b) = self.pieces.last()?;
         Some((*b, (b - a).normalize()))
@@ -231,6 +352,70 @@ mod tests {
     use super::*;
     use crate::config::Config;
     use rand::SeedableRng;
+
+    fn outdoor_road() -> RoadNetwork {
+        let cfg = Config::from_toml_str(
+            include_str!("../../config/outdoor.toml"),
+            std::path::Path::new("config/outdoor.toml"),
+        )
+        .unwrap();
+        RoadNetwork::from_config(&cfg.road)
+    }
+
+    #[test]
+    fn reachable_roads_lie_ahead_within_the_distance_band_split_by_the_turns() {
+        // Outdoor: 0 (0,0) -> 1 (600,0), then 1 -> 2 east with p 0.6, 1 -> 6 north with 0.4.
+        let road = outdoor_road();
+        let from = Enu2::new(550.0, 1.0);
+        let heading = Some(Enu2::new(10.0, 0.0));
+        let r = road.reachable_from(&from, heading, (80.0, 120.0));
+        let pieces: Vec<_> = r.pieces().map(|(p, w)| (*p, w)).collect();
+        assert_eq!(pieces.len(), 2, "{pieces:?}");
+        let east = pieces.iter().find(|(p, _)| p.0.y.abs() < 1e-9).unwrap();
+        let north = pieces
+            .iter()
+            .find(|(p, _)| (p.0.x - 600.0).abs() < 1e-9)
+            .unwrap();
+        // 50 m to the junction, then 30..70 m along each branch.
+        assert!((east.0 .0.x - 630.0).abs() < 1e-6 && (east.0 .1.x - 670.0).abs() < 1e-6);
+        assert!((north.0 .0.y - 30.0).abs() < 1e-6 && (north.0 .1.y - 70.0).abs() < 1e-6);
+        assert!((east.1 - 0.6).abs() < 1e-12 && (north.1 - 0.4).abs() < 1e-12);
+        // Nothing behind, and the total is weighted: 40 m x (0.6 + 0.4).
+        assert!((r.length_m() - 40.0).abs() < 1e-6);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut on_east = 0;
+        for _ in 0..4000 {
+            let (p, dir) = r.sample(&mut rng).unwrap();
+            assert!(p.x >= 600.0 - 1e-9, "behind the junction: {p:?}");
+            if p.y.abs() < 1e-9 {
+                on_east += 1;
+                assert!((dir - Enu2::new(1.0, 0.0)).norm() < 1e-9);
+            } else {
+                assert!((dir - Enu2::new(0.0, 1.0)).norm() < 1e-9);
+            }
+        }
+        let share = on_east as f64 / 4000.0;
+        assert!((share - 0.6).abs() < 0.03, "east share {share}");
+    }
+
+    #[test]
+    fn the_heading_picks_the_edge_and_a_crossing_road_is_not_taken() {
+        // Outdoor has 6 -> 1 (south) and 1 -> 6 (north) on x = 600: the heading decides.
+        let road = outdoor_road();
+        let from = Enu2::new(600.0, 200.0);
+        let north = road.reachable_from(&from, Some(Enu2::new(0.0, 10.0)), (10.0, 20.0));
+        let south = road.reachable_from(&from, Some(Enu2::new(0.0, -10.0)), (10.0, 20.0));
+        let first = |r: &RoadPieces| r.pieces().next().map(|(p, _)| *p).unwrap();
+        assert!(first(&north).0.y > 200.0, "{:?}", first(&north));
+        assert!(first(&south).0.y < 200.0, "{:?}", first(&south));
+        // A point far off every road, heading north-east: still placed, never empty.
+        let off = road.reachable_from(
+            &Enu2::new(300.0, 400.0),
+            Some(Enu2::new(1.0, 1.0)),
+            (0.0, 5.0),
+        );
+        assert!(off.length_m() > 0.0);
+    }
 
     #[test]
     fn transitions_follow_their_probabilities() {

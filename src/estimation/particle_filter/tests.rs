@@ -274,3 +274,57 @@ fn a_blind_step_predicts_without_negative_information() {
     pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
     assert!(mass_inside(&pf, &world, &agent) < 0.5 * blind);
 }
+
+#[test]
+fn road_followers_take_the_branches_only_at_a_junction() {
+    // Outdoor world: every particle 2 m before node 1 (600, 0) driving east at 10 m/s;
+    // one step (3.3 m) takes them through the junction: clones go east (0.6) or north (0.4).
+    let c = Config::from_toml_str(
+        include_str!("../../../config/outdoor.toml"),
+        std::path::Path::new("config/outdoor.toml"),
+    )
+    .unwrap();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(5);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let n = pf.weights().len();
+    let at = |x: f64| {
+        let mut h = Histories::new(n, c.filter.history_len);
+        for i in 0..n {
+            let tr = h.track_mut(i);
+            for t in 0..c.filter.history_len {
+                let back = (c.filter.history_len - 1 - t) as f64;
+                tr[2 * t] = x - back * 10.0 / 3.0;
+                tr[2 * t + 1] = 0.0;
+            }
+        }
+        h
+    };
+    pf.histories = at(598.0);
+    pf.inject_road_followers(&world, 300, &mut rng);
+    // Clones are spread over the step: 2 m before the junction, 1.33 m after it on each
+    // branch; past the junction the branches share the clones as 0.4 to 0.6.
+    let north = (0..n).filter(|&i| pf.particle(i).y > 1e-6).count();
+    let east = (0..n)
+        .filter(|&i| pf.particle(i).x > 600.0 && pf.particle(i).y.abs() < 1e-6)
+        .count();
+    let share = north as f64 / (north + east) as f64;
+    assert!(
+        north + east > 40,
+        "clones past the junction: {}",
+        north + east
+    );
+    assert!(
+        (share - 0.4).abs() < 0.15,
+        "north share {share} ({north} / {east})"
+    );
+    // Every clone is on the road.
+    assert!((0..n).all(|i| world.road.distance_to_roads(&pf.particle(i)) < 1e-6));
+    let total: f64 = pf.weights().iter().sum();
+    assert!((total - 1.0).abs() < 1e-9);
+    // Mid-edge (far from any junction): no clone at all, the particles stay as they were.
+    pf.histories = at(300.0);
+    let before: Vec<Enu2> = (0..n).map(|i| pf.particle(i)).collect();
+    pf.inject_road_followers(&world, 300, &mut rng);
+    assert!((0..n).all(|i| pf.particle(i) == before[i]));
+}
