@@ -201,6 +201,11 @@ struct BenchArgs {
     /// 1280x720); --repetitions is the number of frames per resolution.
     #[arg(long)]
     vision: bool,
+    /// Measure vision at field scale instead: tag recall and ground error against altitude
+    /// (30-90 m) for 1280x720 and 1920x1080 cameras and 1.0-1.5 m roof tags;
+    /// --repetitions is the number of frames per cell.
+    #[arg(long, conflicts_with = "vision")]
+    vision_altitude: bool,
 }
 
 mod cli;
@@ -386,6 +391,15 @@ fn sim(a: SimArgs) -> Result<()> {
 fn bench(a: BenchArgs) -> Result<()> {
     if a.repetitions == 0 {
         bail!("--repetitions must be at least 1");
+    }
+    if a.vision_altitude {
+        let rows = cli::altitude_bench::run(a.repetitions, a.seed)?;
+        print!("{}", cli::altitude_bench::render_table(&rows));
+        if let Some(p) = &a.json {
+            report::write_json(p, &rows)?;
+            println!("wrote {}", p.display());
+        }
+        return Ok(());
     }
     if a.vision {
         let rows = cli::detect_bench::run(a.repetitions, a.seed)?;

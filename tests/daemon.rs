@@ -177,6 +177,47 @@ fn replays_exactly(cfg: &Config, r: &daemon::DaemonReport) {
     assert!(rep.mean_waypoint_diff_m.is_finite());
 }
 
+/// Field scale, closed loop: `config/outdoor.toml` (a car at 10 m/s on 5 km of roads, the
+/// drone at 45 m, a 1280 px camera, a 1.2 m roof tag) flown through the PX4 mock with the
+/// constant-velocity filter. The target is the car in view >= 60 % of the time with
+/// tracking error <= 20 m; seeds 1-3 over the full 300 s gave 74-85 % and 11-18 m, this
+/// seed over 120 s 83 % and 11 m.
+#[test]
+fn outdoor_closed_loop_keeps_the_car_in_view() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml");
+    let mut cfg = Config::load(&path).unwrap();
+    cfg.motion.onnxruntime_library = lab().motion.onnxruntime_library;
+    let r = daemon::run_simulated(
+        &cfg,
+        &RunOptions {
+            seed: 2,
+            motion: "cv".into(),
+            ..opts(120.0, None)
+        },
+    )
+    .unwrap();
+    let s = &r.summary;
+    let frames = r.output.vision;
+    eprintln!(
+        "outdoor: track {:.1} m, FOV {:.1} %, tag in {}/{} frames",
+        s.tracking_error_m, s.fov_percent, frames.detections, frames.frames
+    );
+    assert_eq!(r.stopped_by, StopReason::Duration);
+    assert!(s.fov_percent >= 60.0, "car in view {:.1} %", s.fov_percent);
+    assert!(
+        s.tracking_error_m <= 20.0,
+        "tracking error {:.1} m",
+        s.tracking_error_m
+    );
+    assert!(
+        frames.detections * 2 >= frames.frames,
+        "tag in {}/{} frames",
+        frames.detections,
+        frames.frames
+    );
+    assert_eq!(r.geofence_refusals, 0);
+}
+
 #[test]
 fn ardupilot_closed_loop_through_the_mock() {
     let mut cfg = lab();
