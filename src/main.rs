@@ -132,9 +132,14 @@ struct DatasetArgs {
     /// Seed (default: the config's `seed`).
     #[arg(long)]
     seed: Option<u64>,
-    /// Output CSV file.
+    /// Output CSV file; the world it was recorded in (the signature a model trained on it
+    /// is checked against) goes beside it as `<name>.world.json`.
     #[arg(long)]
     out: PathBuf,
+    /// Write only the world file (`<out>.world.json`), for training on your own flight
+    /// logs of that world.
+    #[arg(long)]
+    world_only: bool,
 }
 
 #[derive(clap::Args)]
@@ -274,6 +279,7 @@ fn sim_closed_loop(a: SimArgs) -> Result<()> {
     if !(duration.is_finite() && duration > 0.0) {
         bail!("--duration must be a positive number of seconds, got {duration}");
     }
+    infotrack::config::bounds::check_duration("--duration", duration, cfg.timing.physics_hz)?;
     if let Some(d) = &a.out {
         std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
     }
@@ -311,6 +317,7 @@ fn sim(a: SimArgs) -> Result<()> {
     if !(duration.is_finite() && duration > 0.0) {
         bail!("--duration must be a positive number of seconds, got {duration}");
     }
+    infotrack::config::bounds::check_duration("--duration", duration, cfg.timing.physics_hz)?;
     let guidance = guidance_names
         .iter()
         .map(|g| g.parse::<GuidanceKind>().map_err(anyhow::Error::msg))
@@ -426,6 +433,17 @@ fn dataset(a: DatasetArgs) -> Result<()> {
             "--duration must be a positive number of seconds, got {}",
             a.duration
         );
+    }
+    infotrack::config::bounds::check_duration("--duration", a.duration, cfg.timing.physics_hz)?;
+    let world = a.out.with_extension("world.json");
+    report::write_json(&world, &cfg.world_signature())?;
+    println!(
+        "wrote the world of scenario {} to {}",
+        cfg.name,
+        world.display()
+    );
+    if a.world_only {
+        return Ok(());
     }
     let steps = infotrack::sim::dataset::record(&cfg, a.seed.unwrap_or(cfg.seed), a.duration);
     report::csv::write(&a.out, &steps)?;

@@ -109,6 +109,51 @@ fn metadata_that_disagrees_with_the_config_is_refused() {
     assert!(err.contains("timing.filter_hz"), "{err}");
 }
 
+/// A model learns one world's roads and speeds: the lab model in the outdoor world is
+/// refused at load with both worlds named, unless the user overrides it; the same world
+/// under another name is accepted, a moved road is not, and a model whose metadata does
+/// not record a world still loads (with a warning).
+#[test]
+fn a_model_from_another_world_is_refused_naming_both_unless_allowed() {
+    let mut c = Config::load(&root().join("config/outdoor.toml")).unwrap();
+    c.motion.dmmn_model = root().join("models/dmmn.onnx");
+    let err = Dmmn::load(&c.motion.dmmn_model, &c.motion_params())
+        .unwrap_err()
+        .to_string();
+    for part in [
+        "`paper-lab`",
+        "`outdoor-suburb`",
+        "road graph",
+        "workspace",
+        "target speeds",
+        "motion.allow_model_from_other_world",
+    ] {
+        assert!(err.contains(part), "`{part}` missing from: {err}");
+    }
+    c.motion.allow_model_from_other_world = true;
+    Dmmn::load(&c.motion.dmmn_model, &c.motion_params()).unwrap();
+
+    let mut renamed = lab_config();
+    renamed.name = "my-lab".into();
+    Dmmn::load(&renamed.motion.dmmn_model, &renamed.motion_params()).unwrap();
+    let mut moved = lab_config();
+    moved.road.nodes[0].x_m += 0.1;
+    let err = Dmmn::load(&moved.motion.dmmn_model, &moved.motion_params())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("they differ in road graph. "), "{err}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("old.onnx");
+    std::fs::copy(root().join("models/dmmn.onnx"), &model).unwrap();
+    let mut meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(root().join("models/dmmn.json")).unwrap())
+            .unwrap();
+    meta.as_object_mut().unwrap().remove("world").unwrap();
+    std::fs::write(dir.path().join("old.json"), meta.to_string()).unwrap();
+    Dmmn::load(&model, &moved.motion_params()).unwrap();
+}
+
 #[test]
 fn missing_model_and_wrong_shape_are_clear_errors() {
     let c = lab_config();

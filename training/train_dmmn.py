@@ -307,6 +307,23 @@ def export(model: Dmmn, out_dir: Path, k_in: int, xva: np.ndarray):
     return path
 
 
+def load_world(data, world_file):
+    """The world the model is trained for: infotrack refuses the model in any other. Every data
+    file must come from the same world (road graph, workspace, target speeds, K_in, dt)."""
+    files = [world_file] if world_file else [d.with_suffix(".world.json") for d in data]
+    missing = [str(f) for f in files if not f.is_file()]
+    if missing:
+        sys.exit(f"no world file {', '.join(missing)}: record the data with `infotrack dataset` "
+                 f"(it writes one), or write it with `infotrack dataset --config YOUR.toml "
+                 f"--world-only --out DATA.csv` and pass --world")
+    worlds = [json.loads(f.read_text()) for f in files]
+    named = {k: v for k, v in worlds[0].items() if k != "name"}
+    for f, w in zip(files[1:], worlds[1:]):
+        if {k: v for k, v in w.items() if k != "name"} != named:
+            sys.exit(f"{f} is another world than {files[0]}: train one model per world")
+    return worlds[0]
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, nargs="+", required=True, help="infotrack log CSV file(s)")
@@ -329,7 +346,11 @@ def main():
     p.add_argument("--cv-max-speed", type=float, default=0.7, help="for the constant-velocity baseline RMSE, m/s")
     p.add_argument("--load-original", type=Path, help="evaluate the authors' weights instead of training")
     p.add_argument("--no-export", action="store_true")
+    p.add_argument("--world", type=Path,
+                   help="the world the data comes from (infotrack dataset --world-only writes it); "
+                        "default: the <data>.world.json that infotrack dataset wrote beside each file")
     args = p.parse_args()
+    world = load_world(args.data, args.world)
     torch.set_num_threads(1)
 
     segments, sha = load_segments(args.data, args.dt)
@@ -378,6 +399,7 @@ def main():
                      "batch": args.batch, "lr": args.lr, "seed": args.seed, "torch": torch.__version__,
                      "original_weights": str(args.load_original) if args.load_original else None},
         "validation": {"one_step_rmse_m": val, "cv_baseline_one_step_rmse_m": baseline},
+        "world": world,
     }
     (args.out / "dmmn.json").write_text(json.dumps(meta, indent=2) + "\n")
     print(f"wrote {path}, {args.out / 'dmmn.json'} and {args.out / 'dmmn_parity.json'}")

@@ -118,6 +118,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
     if !(duration.is_finite() && duration >= 0.0) {
         bail!("--duration must be a number of seconds >= 0 (0: until stopped), got {duration}");
     }
+    infotrack::config::bounds::check_duration("--duration", duration, cfg.timing.physics_hz)?;
     let duration = if duration == 0.0 {
         f64::INFINITY
     } else {

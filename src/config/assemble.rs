@@ -9,6 +9,7 @@ use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams};
 use crate::world::camera::Footprint;
 use crate::world::geometry::{Enu2, PolygonEnu};
 use crate::world::measurement::{Gaussian2, MeasurementModel};
+use crate::world::signature::{road_graph_sha256, SpeedEnvelope, WorldSignature};
 use crate::world::World;
 
 impl Config {
@@ -118,6 +119,24 @@ impl Config {
             cv_max_speed_mps: self.motion.cv_max_speed_mps,
             dmmn_model: self.motion.dmmn_model.clone(),
             onnxruntime_library: self.motion.onnxruntime_library.clone(),
+            world: Some(self.world_signature()),
+            allow_model_from_other_world: self.motion.allow_model_from_other_world,
+        }
+    }
+
+    /// What identifies this world to a learned motion model (recorded by `infotrack
+    /// dataset`, checked when a model is loaded).
+    pub fn world_signature(&self) -> WorldSignature {
+        WorldSignature {
+            name: self.name.clone(),
+            workspace_enu: self.workspace_enu,
+            road_graph_sha256: road_graph_sha256(&self.road),
+            target_speed: SpeedEnvelope {
+                cruise_mps: self.target.cruise_speed_mps,
+                max_mps: self.target.max_speed_mps,
+            },
+            k_in: self.filter.history_len,
+            dt_s: self.filter_dt_s(),
         }
     }
 

@@ -5,6 +5,7 @@
 //! fall back to a default.
 
 mod assemble;
+pub mod bounds;
 mod validate;
 
 use std::path::{Path, PathBuf};
@@ -354,6 +355,11 @@ pub struct MotionConfig {
     /// `.deps/onnxruntime/libonnxruntime.so.1.31.1` (installed by `scripts/setup.sh`).
     #[serde(default)]
     pub onnxruntime_library: Option<PathBuf>,
+    /// Use a learned model whose metadata says it was trained for another world (other
+    /// roads, workspace or target speeds) anyway, with a warning. Default false: such a
+    /// model is refused at start, naming both worlds.
+    #[serde(default)]
+    pub allow_model_from_other_world: bool,
 }
 
 fn default_dmmn_model() -> PathBuf {

@@ -197,3 +197,51 @@ fn a_cue_outside_the_workspace_or_off_every_road_names_the_key() {
     .to_string();
     assert!(e.contains("cue_height_m"), "{e}");
 }
+
+/// The values the fault campaign found aborting the process (allocation failures, a loop
+/// that never ends, the broadcast id) are refused at load, each naming its key; the largest
+/// shipped values load.
+#[test]
+fn sizes_and_rates_that_would_exhaust_the_companion_are_refused_naming_the_key() {
+    use toml::Value::{Float, Integer};
+    let cases: [(&str, &str, toml::Value); 10] = [
+        ("filter", "particles", Integer(1_000_000_000)),
+        ("filter", "history_len", Integer(100_000_000)),
+        ("guidance", "candidate_grid_side", Integer(1_000_000)),
+        ("guidance", "entropy_particles", Integer(1_000_000)),
+        ("guidance", "horizon_steps", Integer(100_000)),
+        ("guidance", "measurements_per_particle", Integer(100_000)),
+        ("timing", "physics_hz", Float(1e12)),
+        ("timing", "duration_s", Float(1e9)),
+        ("daemon", "system_id", Integer(0)),
+        ("daemon", "component_id", Integer(0)),
+    ];
+    for (section, key, value) in cases {
+        let err = load_modified(|t| {
+            if !t.contains_key(section) {
+                t.insert(section.into(), toml::Value::Table(Default::default()));
+            }
+            tbl(t, section).insert(key.into(), value.clone());
+        })
+        .unwrap_err();
+        expect_invalid(err, &format!("{section}.{key}"));
+    }
+    // Each bound alone holds but particles x history is too much together.
+    let err = load_modified(|t| {
+        tbl(t, "filter").insert("particles".into(), Integer(100_000));
+        tbl(t, "filter").insert("history_len".into(), Integer(200));
+    })
+    .unwrap_err();
+    expect_invalid(err, "filter.particles");
+    // A day at 1 kHz physics is too many ticks even though both are within their bounds.
+    let err = load_modified(|t| {
+        tbl(t, "timing").insert("physics_hz".into(), Float(1000.0));
+        tbl(t, "timing").insert("duration_s".into(), Float(86_400.0));
+    })
+    .unwrap_err();
+    expect_invalid(err, "timing.duration_s");
+    for shipped in ["outdoor", "field-ring", "px4", "ardupilot", "default"] {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("config/{shipped}.toml"));
+        Config::load(&p).unwrap_or_else(|e| panic!("{shipped}: {e}"));
+    }
+}

@@ -269,7 +269,7 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
         "guidance.lawn.track_measurement_for_s",
         l.track_measurement_for_s,
     )?;
-    Ok(())
+    super::bounds::check(c)
 }
 
 // Long because each road-graph rule (ids, edges, probabilities, reachability) is checked

@@ -23,6 +23,7 @@ use serde::Deserialize;
 
 use super::{Histories, MotionError, MotionModel, MotionParams};
 use crate::world::geometry::Enu2;
+use crate::world::signature::WorldSignature;
 
 const NAME: &str = "dmmn";
 /// The ONNX Runtime release the `ort` crate's API level (31) is built for.
@@ -50,6 +51,9 @@ pub struct DmmnMetadata {
     pub input_normalisation: String,
     /// Output convention inside the graph (`absolute` or `displacement`).
     pub output_convention: String,
+    /// The world it was trained for (models trained before this was recorded have none).
+    #[serde(default)]
+    pub world: Option<WorldSignature>,
 }
 
 impl DmmnMetadata {
@@ -97,7 +101,41 @@ impl DmmnMetadata {
                 dt
             )));
         }
-        Ok(())
+        self.check_world(params, path)
+    }
+
+    /// Refuses a model trained for another world (another road graph, workspace or target
+    /// speeds) unless the user allowed it; a model that does not say is used with a warning.
+    fn check_world(&self, params: &MotionParams, path: &Path) -> Result<(), MotionError> {
+        let Some(here) = &params.world else {
+            return Ok(());
+        };
+        let Some(trained) = &self.world else {
+            tracing::warn!(
+                "model metadata {} does not say which world the model was trained for; using it in world {} unchecked",
+                path.display(),
+                here.describe()
+            );
+            return Ok(());
+        };
+        let differences = trained.differences(here);
+        if differences.is_empty() {
+            return Ok(());
+        }
+        let what = format!(
+            "model metadata {} says the model was trained for world {}, but this is world {}: they differ in {}",
+            path.display(),
+            trained.describe(),
+            here.describe(),
+            differences.join(", ")
+        );
+        if params.allow_model_from_other_world {
+            tracing::warn!("{what}; used anyway (motion.allow_model_from_other_world = true)");
+            return Ok(());
+        }
+        Err(err(format!(
+            "{what}. Train a model for this world (README: \"A model for your own area\"), use --motion cv, or set motion.allow_model_from_other_world = true"
+        )))
     }
 }
 

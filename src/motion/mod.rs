@@ -34,6 +34,11 @@ pub struct MotionParams {
     pub dmmn_model: PathBuf,
     /// The ONNX Runtime library to load; `None`: the default search.
     pub onnxruntime_library: Option<PathBuf>,
+    /// The world the filter runs in, checked against the one a learned model was trained
+    /// for; `None`: not checked.
+    pub world: Option<crate::world::signature::WorldSignature>,
+    /// Use a learned model trained for another world anyway (with a warning).
+    pub allow_model_from_other_world: bool,
 }
 
 /// Builds the named motion model.

@@ -5,6 +5,7 @@ pub mod camera;
 pub mod geometry;
 pub mod measurement;
 pub mod road;
+pub mod signature;
 
 use camera::Footprint;
 use geometry::{BoundsEnu, Enu2, PolygonEnu};
