@@ -569,6 +569,7 @@ fn params(a: ParamsArgs) -> Result<()> {
         .as_deref()
         .map(infotrack::autopilot::signing::SigningKey::load)
         .transpose()?;
+    let file_name = a.file.display().to_string();
     let ok = runtime()?.block_on(async move {
         let mut lc = link::LinkConfig::new(&a.connect);
         lc.signing_key = key;
@@ -581,6 +582,14 @@ fn params(a: ParamsArgs) -> Result<()> {
             params_sync::check(&l, &file).await
         };
         print!("{}", params_sync::render(&rows));
+        let untouched = rows
+            .iter()
+            .any(|r| r.status == params_sync::ParamStatus::NotWritten);
+        if untouched {
+            bail!(
+                "{file_name}: nothing was written: the file is applied whole or not at all, and the vehicle lacks some of its parameters or cannot hold their values (see the table)"
+            );
+        }
         Ok::<bool, anyhow::Error>(params_sync::all_ok(&rows))
     })?;
     if !ok {

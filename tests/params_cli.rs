@@ -112,9 +112,20 @@ fn a_parameter_the_vehicle_lacks_is_reported_not_skipped() {
         out.contains("NOT_A_PARAM") && out.contains("NOT ON VEHICLE"),
         "{out}"
     );
+    // All or nothing: the parameter the vehicle has is not written either.
     assert!(
-        out.contains("GUID_TIMEOUT") && out.contains("applied"),
+        out.contains("GUID_TIMEOUT") && out.contains("not written") && !out.contains("applied"),
         "{out}"
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("nothing was written"), "{err}");
+    let only = dir.path().join("only.parm");
+    std::fs::write(&only, "GUID_TIMEOUT,2\n").unwrap();
+    let o = params("check", &only, port);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("MISMATCH"),
+        "still the vehicle's own value:\n{out}"
     );
 }
 

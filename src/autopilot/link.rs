@@ -130,6 +130,9 @@ pub struct LinkConfig {
     pub heartbeat_timeout: Duration,
     /// Log every message sent and received to this telemetry log (.tlog).
     pub tlog: Option<std::path::PathBuf>,
+    /// The vehicle's system and component id; `None`: the first autopilot heard. Either
+    /// way the link locks onto one vehicle and ignores (and reports once) every other.
+    pub vehicle: Option<(u8, u8)>,
 }
 
 impl LinkConfig {
@@ -147,6 +150,7 @@ impl LinkConfig {
             signing_link_id: 1,
             heartbeat_timeout: Duration::from_secs(3),
             tlog: None,
+            vehicle: None,
         }
     }
 }
@@ -172,7 +176,7 @@ fn spawn_reader(
     tlog: SharedTlog,
     state: SharedState,
     events: broadcast::Sender<LinkEvent>,
-    me: (u8, u8),
+    ids: Ids,
 ) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
         loop {
@@ -181,7 +185,7 @@ fn spawn_reader(
                     if let Some(t) = &tlog {
                         t.record(&h, &m);
                     }
-                    on_message(&state, &events, me, &h, &m)
+                    on_message(&state, &events, ids, &h, &m)
                 }
                 Err(e) if conn.reopens() && is_dead_stream(&e) => {
                     tracing::error!("link: {e}: the connection is gone; reopening");
@@ -269,11 +273,10 @@ fn spawn_streamer(
                 continue;
             };
             let (p, v) = target_sp.at(Instant::now(), streamer.geofence_enu.as_ref());
-            let target = state
-                .lock()
-                .expect("state poisoned")
-                .address
-                .unwrap_or((1, 1));
+            // No vehicle locked yet: a setpoint has nobody to go to.
+            let Some(target) = state.lock().expect("state poisoned").address else {
+                continue;
+            };
             let m = position_target(
                 target,
                 p,
@@ -407,6 +410,11 @@ pub struct VehicleState {
     pub reboots: u32,
     /// Latest time_boot_ms seen in telemetry, ms.
     pub time_boot_ms: Option<u32>,
+    /// Other autopilots heard (system, component) and ignored: the link is locked to
+    /// `address`.
+    pub ignored_autopilots: std::collections::BTreeSet<(u8, u8)>,
+    /// Telemetry messages dropped for a NaN or infinite field.
+    pub non_finite_dropped: u64,
 }
 
 struct Streamer {
@@ -514,7 +522,10 @@ impl VehicleLink {
             tlog.clone(),
             state.clone(),
             events.clone(),
-            me,
+            Ids {
+                me,
+                vehicle: cfg.vehicle,
+            },
         );
         let heartbeat =
             spawn_heartbeat(conn.clone(), tlog.clone(), heartbeat_paused.clone(), header);
@@ -1022,13 +1033,29 @@ fn boot_clock(s: &mut VehicleState, events: &broadcast::Sender<LinkEvent>, t_ms:
 fn on_message(
     state: &Mutex<VehicleState>,
     events: &broadcast::Sender<LinkEvent>,
-    me: (u8, u8),
+    ids: Ids,
     h: &MavHeader,
     m: &MavMessage,
 ) {
+    let me = ids.me;
     let now = Instant::now();
     let mut s = state.lock().expect("state poisoned");
-    let from_vehicle = s.address.map(|a| a.0 as u32 == h.system_id).unwrap_or(true);
+    let sender = (h.system_id as u8, h.component_id);
+    let from_vehicle = s.address == Some(sender);
+    if !from_vehicle && !matches!(m, MavMessage::HEARTBEAT(_)) {
+        return;
+    }
+    if non_finite_telemetry(m) {
+        s.non_finite_dropped += 1;
+        if s.non_finite_dropped.is_power_of_two() {
+            tracing::warn!(
+                "dropped {} telemetry message(s) with NaN or infinite fields so far (latest: {})",
+                s.non_finite_dropped,
+                mavlink::Message::message_name(m)
+            );
+        }
+        return;
+    }
     match m {
         MavMessage::HEARTBEAT(hb) => {
             let flavor = match hb.autopilot {
@@ -1036,8 +1063,10 @@ fn on_message(
                 MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Flavor::ArduPilot,
                 _ => return, // a GCS, a camera, another companion
             };
+            if !lock_onto(&mut s, ids.vehicle, sender) {
+                return;
+            }
             s.flavor = Some(flavor);
-            s.address = Some((h.system_id as u8, h.component_id));
             s.last_heartbeat = Some(now);
             if s.lost {
                 s.lost = false;
@@ -1066,7 +1095,6 @@ fn on_message(
             }
             s.mode = Some(mode);
         }
-        _ if !from_vehicle => {}
         MavMessage::COMMAND_ACK(a) => {
             // ACKs addressed to someone else are not ours.
             let ours = (a.target_system == 0 || a.target_system == me.0)
@@ -1132,9 +1160,156 @@ fn on_message(
     }
 }
 
+/// Our ids and the vehicle's, if configured.
+#[derive(Debug, Clone, Copy)]
+struct Ids {
+    me: (u8, u8),
+    vehicle: Option<(u8, u8)>,
+}
+
+/// Whether an autopilot's heartbeat from `sender` is the vehicle's: the configured one, or
+/// the first heard. Any other is ignored and reported once; a vehicle that reboots keeps its
+/// ids and stays the vehicle.
+fn lock_onto(s: &mut VehicleState, configured: Option<(u8, u8)>, sender: (u8, u8)) -> bool {
+    let ours = match (s.address, configured) {
+        (Some(locked), _) => locked == sender,
+        (None, Some(wanted)) => wanted == sender,
+        (None, None) => true,
+    };
+    if ours {
+        s.address = Some(sender);
+    } else if s.ignored_autopilots.insert(sender) {
+        let to = s.address.or(configured).expect("locked or configured");
+        tracing::warn!(
+            "ignoring the autopilot of system {} component {}: infotrack flies system {} component {} only",
+            sender.0,
+            sender.1,
+            to.0,
+            to.1
+        );
+    }
+    ours
+}
+
+/// A position, velocity or attitude message with a NaN or infinite field: it must not
+/// reach the vehicle state the tracker and the geofence read.
+fn non_finite_telemetry(m: &MavMessage) -> bool {
+    let bad = |v: &[f32]| v.iter().any(|x| !x.is_finite());
+    match m {
+        MavMessage::LOCAL_POSITION_NED(p) => bad(&[p.x, p.y, p.z, p.vx, p.vy, p.vz]),
+        MavMessage::ATTITUDE(a) => bad(&[
+            a.roll,
+            a.pitch,
+            a.yaw,
+            a.rollspeed,
+            a.pitchspeed,
+            a.yawspeed,
+        ]),
+        _ => false,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn header(system_id: u8, component_id: u8) -> MavHeader {
+        MavHeader {
+            system_id: system_id as u32,
+            component_id,
+            sequence: 0,
+        }
+    }
+
+    fn autopilot_heartbeat() -> MavMessage {
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            ..Default::default()
+        })
+    }
+
+    fn position(x: f32) -> MavMessage {
+        MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+            x,
+            y: 2.0,
+            z: -10.0,
+            ..Default::default()
+        })
+    }
+
+    fn feed(vehicle: Option<(u8, u8)>, msgs: &[(MavHeader, MavMessage)]) -> VehicleState {
+        let state = Mutex::new(VehicleState::default());
+        let (events, _) = broadcast::channel(64);
+        let ids = Ids {
+            me: (1, 191),
+            vehicle,
+        };
+        for (h, m) in msgs {
+            on_message(&state, &events, ids, h, m);
+        }
+        let s = state.lock().unwrap().clone();
+        s
+    }
+
+    /// The fault campaign's second vehicle (system 42 with heartbeats and a pose) is
+    /// ignored and reported once; the vehicle's pose is the one kept.
+    #[test]
+    fn the_link_locks_onto_the_first_autopilot_and_ignores_another() {
+        let s = feed(
+            None,
+            &[
+                (header(1, 1), autopilot_heartbeat()),
+                (header(1, 1), position(5.0)),
+                (header(42, 1), autopilot_heartbeat()),
+                (header(42, 1), position(40.0)),
+                (header(42, 1), autopilot_heartbeat()),
+                // A component of the vehicle's own system that is not the autopilot.
+                (header(1, 154), position(99.0)),
+            ],
+        );
+        assert_eq!(s.address, Some((1, 1)));
+        assert_eq!(s.local_ned.unwrap().1.x_north_m, 5.0);
+        assert_eq!(
+            s.ignored_autopilots.iter().copied().collect::<Vec<_>>(),
+            vec![(42, 1)]
+        );
+        // Heard first, system 42 would have been the vehicle; configured, only system 5 is.
+        let s = feed(
+            Some((5, 1)),
+            &[
+                (header(42, 1), autopilot_heartbeat()),
+                (header(42, 1), position(40.0)),
+                (header(5, 1), autopilot_heartbeat()),
+                (header(5, 1), position(6.0)),
+            ],
+        );
+        assert_eq!(s.address, Some((5, 1)));
+        assert_eq!(s.local_ned.unwrap().1.x_north_m, 6.0);
+    }
+
+    #[test]
+    fn telemetry_with_nan_or_inf_is_dropped_and_counted() {
+        let attitude = |roll: f32| {
+            MavMessage::ATTITUDE(ATTITUDE_DATA {
+                roll,
+                ..Default::default()
+            })
+        };
+        let s = feed(
+            None,
+            &[
+                (header(1, 1), autopilot_heartbeat()),
+                (header(1, 1), position(3.0)),
+                (header(1, 1), position(f32::NAN)),
+                (header(1, 1), position(f32::INFINITY)),
+                (header(1, 1), attitude(0.1)),
+                (header(1, 1), attitude(f32::NAN)),
+            ],
+        );
+        assert_eq!(s.local_ned.unwrap().1.x_north_m, 3.0);
+        assert_eq!(s.attitude.unwrap().1[0], 0.1);
+        assert_eq!(s.non_finite_dropped, 3);
+    }
 
     #[test]
     fn urls_are_checked_with_a_reason() {

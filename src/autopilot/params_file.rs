@@ -155,6 +155,16 @@ impl ParamFormat {
     }
 }
 
+/// Text from the file as it goes into a message: at most 40 characters (a 1 MB line is not
+/// echoed whole).
+fn cut(text: &str) -> String {
+    const MAX: usize = 40;
+    match text.char_indices().nth(MAX) {
+        Some((i, _)) => format!("{}... ({} bytes)", &text[..i], text.len()),
+        None => text.to_string(),
+    }
+}
+
 fn check_name(path: &Path, line: usize, name: &str) -> Result<(), ParamFileError> {
     let ok = !name.is_empty()
         && name.len() <= 16
@@ -165,7 +175,10 @@ fn check_name(path: &Path, line: usize, name: &str) -> Result<(), ParamFileError
         Err(ParamFileError::Line {
             path: path.to_path_buf(),
             line,
-            message: format!("`{name}` is not a parameter name (1-16 characters of A-Z, 0-9, _)"),
+            message: format!(
+                "`{}` is not a parameter name (1-16 characters of A-Z, 0-9, _)",
+                cut(name)
+            ),
         })
     }
 }
@@ -192,6 +205,8 @@ pub fn parse(
     format: ParamFormat,
     origin: &Path,
 ) -> Result<Vec<FileParam>, ParamFileError> {
+    // Editors on Windows write a byte-order mark and CRLF line ends (`lines` drops the CR).
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut out: Vec<FileParam> = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let line = i + 1;
@@ -215,13 +230,13 @@ pub fn parse(
                 }
                 for (k, what) in [(0, "vehicle id"), (1, "component id")] {
                     fields[k].parse::<u8>().map_err(|_| {
-                        err(format!("{what} `{}` is not a number 0-255", fields[k]))
+                        err(format!("{what} `{}` is not a number 0-255", cut(fields[k])))
                     })?;
                 }
                 let ty_n: u8 = fields[4].parse().map_err(|_| {
                     err(format!(
                         "type `{}` is not a MAV_PARAM_TYPE number",
-                        fields[4]
+                        cut(fields[4])
                     ))
                 })?;
                 let ty = ParamType::from_mav(ty_n).ok_or_else(|| {
@@ -248,7 +263,7 @@ pub fn parse(
         check_name(origin, line, &name)?;
         let value: f64 = value
             .parse()
-            .map_err(|_| err(format!("value `{value}` of {name} is not a number")))?;
+            .map_err(|_| err(format!("value `{}` of {name} is not a number", cut(&value))))?;
         if !value.is_finite() {
             return Err(err(format!("value of {name} is not finite")));
         }
@@ -270,6 +285,13 @@ pub fn parse(
             value,
             ty,
             line,
+        });
+    }
+    if out.is_empty() {
+        return Err(ParamFileError::Line {
+            path: origin.to_path_buf(),
+            line: 0,
+            message: "no parameters in the file (only blank lines and comments): nothing to check or apply".into(),
         });
     }
     Ok(out)
@@ -374,6 +396,36 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.starts_with("g.parm:2:"), "{e}");
+    }
+
+    /// The fault campaign's parameter-file rows: a BOM and CRLF are read, an empty file is
+    /// an error, a 1 MB line is not echoed whole.
+    #[test]
+    fn bom_crlf_empty_files_and_long_lines() {
+        let text = "\u{feff}1\t1\tCOM_OF_LOSS_T\t1.0\t9\r\n1\t1\tNAV_DLL_ACT\t2\t6\r\n";
+        let v = parse(text, ParamFormat::Qgc, p()).unwrap();
+        assert_eq!(v.len(), 2);
+        assert_eq!((v[0].name.as_str(), v[1].value), ("COM_OF_LOSS_T", 2.0));
+        let v = parse(
+            "\u{feff}WPNAV_SPEED,500\r\n",
+            ParamFormat::MissionPlanner,
+            p(),
+        )
+        .unwrap();
+        assert_eq!(v[0].name, "WPNAV_SPEED");
+        for empty in ["", "# only a comment\n\n", "\u{feff}"] {
+            let e = parse(empty, ParamFormat::Qgc, Path::new("e.params"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("e.params") && e.contains("no parameters"), "{e}");
+        }
+        let long = format!("1\t1\tA\t{}\t9\n", "9x".repeat(500_000));
+        let e = parse(&long, ParamFormat::Qgc, p()).unwrap_err().to_string();
+        assert!(
+            e.contains("not a number") && e.len() < 200,
+            "{} bytes",
+            e.len()
+        );
     }
 
     #[test]

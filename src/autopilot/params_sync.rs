@@ -33,6 +33,12 @@ pub enum ParamStatus {
     Applied,
     /// Writing failed.
     Failed,
+    /// The vehicle's type for it cannot hold the file's value (an integer parameter set to
+    /// 1.5, a value out of its type's range).
+    DoesNotFit,
+    /// Not written: another parameter of the file is missing or does not fit, and a file is
+    /// applied whole or not at all.
+    NotWritten,
 }
 
 fn same(a: f64, b: f64) -> bool {
@@ -60,28 +66,47 @@ pub async fn check(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
     rows
 }
 
-/// Writes every parameter of the file, with the type the vehicle reports for it.
+/// Writes every parameter of the file, with the type the vehicle reports for it: all or
+/// nothing. Every parameter is read first; if the vehicle lacks one, or its type cannot hold
+/// the file's value, nothing is written and the report says which.
 pub async fn apply(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
-    let mut rows = Vec::new();
+    let mut found = Vec::new();
     for p in params {
-        let row = match link.param_read(&p.name).await {
-            Err(_) => (None, ParamStatus::Missing),
-            Ok((_, ty)) => {
-                if let Some(file_ty) = p.ty.filter(|t| *t != ty) {
-                    tracing::warn!("{}: the file says type {file_ty:?}, the vehicle {ty:?}; using the vehicle's", p.name);
-                }
-                match link.param_set(&p.name, p.value, ty).await {
-                    Ok(v) => (Some(v), ParamStatus::Applied),
-                    Err(LinkError::Timeout { .. }) | Err(_) => (None, ParamStatus::Failed),
-                }
-            }
-        };
-        rows.push(ParamRow {
-            name: p.name.clone(),
-            line: p.line,
-            file_value: p.value,
-            vehicle_value: row.0,
-            status: row.1,
+        found.push(match link.param_read(&p.name).await {
+            Err(_) => Err(ParamStatus::Missing),
+            Ok((_, ty)) if !ty.accepts(p.value) => Err(ParamStatus::DoesNotFit),
+            Ok((v, ty)) => Ok((v, ty)),
+        });
+    }
+    let row = |p: &FileParam, vehicle_value, status| ParamRow {
+        name: p.name.clone(),
+        line: p.line,
+        file_value: p.value,
+        vehicle_value,
+        status,
+    };
+    if found.iter().any(|f| f.is_err()) {
+        return params
+            .iter()
+            .zip(found)
+            .map(|(p, f)| match f {
+                Err(status) => row(p, None, status),
+                Ok((v, _)) => row(p, Some(v), ParamStatus::NotWritten),
+            })
+            .collect();
+    }
+    let mut rows = Vec::new();
+    for (p, f) in params.iter().zip(found) {
+        let ty = f.expect("all found").1;
+        if let Some(file_ty) = p.ty.filter(|t| *t != ty) {
+            tracing::warn!(
+                "{}: the file says type {file_ty:?}, the vehicle {ty:?}; using the vehicle's",
+                p.name
+            );
+        }
+        rows.push(match link.param_set(&p.name, p.value, ty).await {
+            Ok(v) => row(p, Some(v), ParamStatus::Applied),
+            Err(LinkError::Timeout { .. }) | Err(_) => row(p, None, ParamStatus::Failed),
         });
     }
     rows
@@ -110,6 +135,8 @@ pub fn render(rows: &[ParamRow]) -> String {
             ParamStatus::Missing => "NOT ON VEHICLE",
             ParamStatus::Applied => "applied",
             ParamStatus::Failed => "FAILED",
+            ParamStatus::DoesNotFit => "DOES NOT FIT ITS TYPE",
+            ParamStatus::NotWritten => "not written",
         };
         let _ = writeln!(
             s,

@@ -124,6 +124,13 @@ pub(super) fn check(c: &Config) -> Result<(), ConfigError> {
             reason: "0 is MAVLink's broadcast id; use 1-255 (the vehicle's is usually 1, a companion's too)".into(),
         });
     }
+    if d.vehicle_id.is_some_and(|[s, c]| s == 0 || c == 0) {
+        return Err(ConfigError::Invalid {
+            key: "daemon.vehicle_id".into(),
+            value: format!("{:?}", d.vehicle_id.unwrap_or_default()),
+            reason: "0 is MAVLink's broadcast id; give the vehicle's own [system, component] (an autopilot is usually [1, 1])".into(),
+        });
+    }
     if d.component_id == 0 {
         return Err(ConfigError::Invalid {
             key: "daemon.component_id".into(),

@@ -128,6 +128,9 @@ pub struct DaemonConfig {
     pub camera_fps: f64,
     /// Motion model of the particle filter (`dmmn`, `cv`); `--motion` overrides it.
     pub motion: String,
+    /// The vehicle's MAVLink `[system id, component id]`; default: the first autopilot
+    /// heard. Either way infotrack flies that one vehicle and ignores every other.
+    pub vehicle_id: Option<[u8; 2]>,
     /// Own MAVLink system id.
     pub system_id: u8,
     /// Own MAVLink component id (191: onboard computer).
@@ -168,6 +171,7 @@ impl Default for DaemonConfig {
             camera_offset_body_frd_m: [0.0; 3],
             camera_fps: 0.0,
             motion: "dmmn".into(),
+            vehicle_id: None,
             system_id: 1,
             component_id: 191,
             setpoint_hz: 20.0,

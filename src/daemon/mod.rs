@@ -431,6 +431,7 @@ async fn connect(
     lc.setpoint_hz = d.setpoint_hz;
     lc.geofence_enu = Some(cfg.workspace_enu);
     lc.tlog = opts.tlog.clone();
+    lc.vehicle = d.vehicle_id.map(|[s, c]| (s, c));
     lc.signing_key = d.signing_key.as_deref().map(SigningKey::load).transpose()?;
     let link = VehicleLink::connect(lc).await?;
     let flavor = tokio::select! {

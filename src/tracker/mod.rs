@@ -427,7 +427,9 @@ impl Tracker {
         self.respread_done = true;
         let speeds = self.hypothesis_speeds();
         let v_far = *speeds.end();
-        let reachable = self.reachable_since_seen(t_s);
+        let reachable = self
+            .reachable_since_seen(t_s)
+            .or_else(|| self.reachable_since_cue(t_s));
         let region = match self.last_measurement {
             Some((tm, zm)) => Some((zm, v_far * (t_s - tm))),
             None => self.params.cue.map(|(c, r)| (c, r + v_far * t_s)),
@@ -458,6 +460,23 @@ impl Tracker {
                 speeds.end() * elapsed + slack,
             ),
         );
+        (roads.length_m() > 0.0).then_some(roads)
+    }
+
+    /// Before the first measurement, the roads a target that was on the roads within the
+    /// cue at the start can have driven to by `t_s`, forward along the allowed directions
+    /// at the speeds of [`Self::hypothesis_speeds`]. `None` after a measurement, without a
+    /// cue, or when no road is reachable.
+    fn reachable_since_cue(&self, t_s: f64) -> Option<crate::world::road::RoadPieces> {
+        if self.last_measurement.is_some() {
+            return None;
+        }
+        let cue = self.params.cue?;
+        let speeds = self.hypothesis_speeds();
+        let roads = self
+            .world
+            .road
+            .reachable_from_region(cue, (speeds.start() * t_s, speeds.end() * t_s));
         (roads.length_m() > 0.0).then_some(roads)
     }
 
