@@ -288,6 +288,7 @@ fn sim_closed_loop(a: SimArgs) -> Result<()> {
         seed: a.seed.unwrap_or(cfg.seed),
         motion: cfg.daemon.motion.clone(),
         tlog: a.out.as_ref().map(|d| d.join("link.tlog")),
+        records_dir: a.out.clone(),
         status_line: false,
         faults: Vec::new(),
     };

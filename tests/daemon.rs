@@ -26,6 +26,7 @@ fn opts(duration_s: f64, tlog: Option<std::path::PathBuf>) -> RunOptions {
         seed: 7,
         motion: "dmmn".into(),
         tlog,
+        records_dir: None,
         status_line: false,
         faults: vec![],
     }
@@ -346,6 +347,79 @@ async fn sigterm_leaves_the_vehicle_in_hold() {
         alt()
     );
     assert_eq!(mock.with(|m| m.mode()), Mode::Brake);
+}
+
+/// Nothing lost: a flight killed with SIGKILL (no chance to write anything at exit) leaves
+/// `steps.csv`, `flight.csv` and `summary.json` that parse, with records written within
+/// the last second and a second before the kill at most missing from the steps.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigkill_mid_flight_leaves_parseable_records_up_to_the_last_second() {
+    let (_mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("flight");
+    let mut child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .args([
+            "run",
+            "--quiet",
+            "--duration",
+            "120",
+            "--motion",
+            "cv",
+            "--out",
+        ])
+        .arg(&out)
+        .arg("--vehicle")
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let rows = |name: &str| {
+        std::fs::read_to_string(out.join(name))
+            .map(|t| t.lines().count())
+            .unwrap_or(0)
+    };
+    // Tracking for a while: 3 filter steps a second, summary every 5 s.
+    let tracking = eventually(60.0, || rows("flight.csv") > 2 + 3 * 7).await;
+    assert!(tracking, "no records after 60 s");
+    tokio::time::sleep(Duration::from_millis(700)).await;
+    let pid = child.id().unwrap() as i32;
+    // SAFETY: killing our own child process.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGKILL) }, 0);
+    let killed_at = std::time::SystemTime::now();
+    child.wait().await.unwrap();
+
+    let text = std::fs::read_to_string(out.join("flight.csv")).unwrap();
+    let (seed, motion, steps) = infotrack::daemon::flight_log::parse(&text, "flight.csv").unwrap();
+    assert_eq!((seed, motion.as_str()), (7, "cv"));
+    assert!(steps.len() >= 21, "{} steps", steps.len());
+    let modified = std::fs::metadata(out.join("flight.csv"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let age = killed_at.duration_since(modified).unwrap_or_default();
+    assert!(
+        age <= Duration::from_millis(1500),
+        "the newest record reached the disk {age:?} before the kill"
+    );
+    // steps.csv: the header and complete rows (at most the last one cut short).
+    let steps_csv = std::fs::read_to_string(out.join("steps.csv")).unwrap();
+    let mut lines: Vec<&str> = steps_csv.lines().collect();
+    assert_eq!(lines.remove(0), infotrack::report::csv::HEADER);
+    if !steps_csv.ends_with('\n') {
+        lines.pop();
+    }
+    let fields = infotrack::report::csv::HEADER.split(',').count();
+    assert!(lines.iter().all(|l| l.split(',').count() == fields));
+    assert!(
+        lines.len() + 3 >= steps.len(),
+        "{} rows in steps.csv, {} in flight.csv",
+        lines.len(),
+        steps.len()
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert!(summary["tracking_error_m"].as_f64().unwrap().is_finite());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

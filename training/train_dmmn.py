@@ -48,7 +48,12 @@ def load_segments(paths: list[Path], dt_s: float) -> tuple[list[np.ndarray], str
     for path in paths:
         raw = path.read_bytes()
         h.update(raw)
-        rows = csv.DictReader(raw.decode().splitlines())
+        lines = raw.decode().splitlines()
+        if raw and not raw.endswith(b"\n"):
+            # A flight stopped mid-write leaves its last row cut short: leave it out.
+            print(f"{path}: the last line is cut short (an interrupted flight); left out")
+            lines = lines[:-1]
+        rows = csv.DictReader(lines)
         need = {"t_s", "measured", "z_x_enu_m", "z_y_enu_m"}
         if rows.fieldnames is None or not need.issubset(rows.fieldnames):
             sys.exit(f"{path}: not an infotrack log CSV (needs columns {sorted(need)})")

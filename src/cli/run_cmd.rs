@@ -20,9 +20,14 @@ pub struct RunArgs {
     /// SIGINT/SIGTERM.
     #[arg(long)]
     duration: Option<f64>,
-    /// Folder for the logs (per-step CSV, MAVLink .tlog, plots, summary JSON).
-    #[arg(long)]
+    /// Folder for the logs (per-step CSV, MAVLink .tlog, plots, summary JSON), written as
+    /// the flight goes; an existing one is overwritten (scripts, tests).
+    #[arg(long, conflicts_with = "log_dir")]
     out: Option<PathBuf>,
+    /// Keep every flight: its logs go into a new folder `<UTC date-time>-<seed>` under this
+    /// one, never overwritten (the field; the systemd unit).
+    #[arg(long)]
+    log_dir: Option<PathBuf>,
     /// Seed (default: the config's `seed`).
     #[arg(long)]
     seed: Option<u64>,
@@ -124,23 +129,35 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
     } else {
         duration
     };
-    if let Some(dir) = &a.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    }
     if let Some(m) = &a.motion {
         cfg.daemon.motion = m.clone();
         cfg.validate().with_context(|| format!("--motion `{m}`"))?;
     }
     let motion = cfg.daemon.motion.clone();
+    let seed = a.seed.unwrap_or(cfg.seed);
+    let out = match (&a.out, &a.log_dir) {
+        (Some(dir), _) => {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            Some(dir.clone())
+        }
+        (None, Some(root)) => {
+            let dir = infotrack::daemon::recorder::flight_folder(root, seed)?;
+            println!("this flight's logs: {}", dir.display());
+            Some(dir)
+        }
+        (None, None) => None,
+    };
     let opts = RunOptions {
         duration_s: duration,
-        seed: a.seed.unwrap_or(cfg.seed),
+        seed,
         motion: motion.clone(),
-        tlog: a.out.as_ref().map(|d| d.join("link.tlog")),
+        tlog: out.as_ref().map(|d| d.join("link.tlog")),
+        records_dir: out.clone(),
         status_line: !a.quiet,
         faults: a.inject.clone(),
     };
-    fly(&cfg, &opts, a.out.as_deref(), Clock::Wall(rt))
+    fly(&cfg, &opts, out.as_deref(), Clock::Wall(rt))
 }
 
 /// Which clock a flight runs on.
@@ -184,11 +201,13 @@ pub fn fly(
             .iter()
             .map(|r| r.step.clone())
             .collect();
-        report::csv::write(&dir.join("steps.csv"), &steps)?;
-        report::write_file(
-            &dir.join("flight.csv"),
-            flight_log::render(&report.output.records, opts.seed, &motion).as_bytes(),
-        )?;
+        // steps.csv and flight.csv were written as the flight went (daemon::recorder).
+        if let Some(why) = &report.output.records_failure {
+            eprintln!(
+                "warning: the flight's records in {} stopped early: {why}",
+                dir.display()
+            );
+        }
         let world = cfg.world();
         report::plots::scene(
             &dir.join("scene.png"),

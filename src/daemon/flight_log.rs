@@ -54,8 +54,22 @@ pub struct LoggedStep {
 /// Writes the log. Inputs are written with Rust's shortest round-trip formatting, so that
 /// replay reads back exactly the numbers the filter saw.
 pub fn render(records: &[FlightRecord], seed: u64, motion: &str) -> String {
-    let mut s = format!("# infotrack flight log seed={seed} motion={motion}\n{HEADER}\n");
+    let mut s = preamble(seed, motion);
     for r in records {
+        s.push_str(&render_row(r));
+    }
+    s
+}
+
+/// The first two lines: the seed and motion model, and the header.
+pub fn preamble(seed: u64, motion: &str) -> String {
+    format!("# infotrack flight log seed={seed} motion={motion}\n{HEADER}\n")
+}
+
+/// One record as a row, newline included.
+pub fn render_row(r: &FlightRecord) -> String {
+    let mut s = String::with_capacity(256);
+    {
         let (mx, my) = r
             .step
             .measurement_enu
@@ -138,8 +152,32 @@ pub fn parse(text: &str, path: &str) -> Result<(u64, String, Vec<LoggedStep>), F
         _ => return Err(err(2, format!("expected the header `{HEADER}`"))),
     };
     let mut steps = Vec::new();
-    for (i, line) in lines {
+    // A flight stopped mid-write (SIGKILL, power) leaves a last line without its newline:
+    // what is before it is read, it is dropped with a warning.
+    let cut_last = !text.is_empty() && !text.ends_with('\n');
+    let body: Vec<(usize, &str)> = lines.collect();
+    let last = body.len();
+    for (k, (i, line)) in body.into_iter().enumerate() {
         let n = i + 1;
+        match parse_row(line, n, fields, &err) {
+            Ok(step) => steps.push(step),
+            Err(e) if cut_last && k + 1 == last => {
+                tracing::warn!("{path}: the last line ({n}) is cut short and is left out: {e}");
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok((seed, motion, steps))
+}
+
+/// One data row (line `n`).
+fn parse_row(
+    line: &str,
+    n: usize,
+    fields: usize,
+    err: &dyn Fn(usize, String) -> FlightLogError,
+) -> Result<LoggedStep, FlightLogError> {
+    {
         let f: Vec<&str> = line.split(',').collect();
         if f.len() != fields {
             return Err(err(n, format!("{} fields, expected {fields}", f.len())));
@@ -165,7 +203,7 @@ pub fn parse(text: &str, path: &str) -> Result<(u64, String, Vec<LoggedStep>), F
             "hold" | "none" => None,
             v => return Err(err(n, format!("command `{v}` is not goto, hold or none"))),
         };
-        steps.push(LoggedStep {
+        Ok(LoggedStep {
             t_s: num(0)?,
             vehicle_enu: PositionNed {
                 x_north_m: num(1)?,
@@ -178,14 +216,28 @@ pub fn parse(text: &str, path: &str) -> Result<(u64, String, Vec<LoggedStep>), F
             measurement_enu: measured.then_some(z),
             estimate_enu: Enu2::new(num(11)?, num(12)?),
             command_enu: cmd,
-        });
+        })
     }
-    Ok((seed, motion, steps))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A log cut mid-line (the process killed while writing) reads up to its last
+    /// complete row; the same damage inside the file is an error naming the line.
+    #[test]
+    fn a_cut_last_line_is_left_out_but_a_bad_middle_line_is_an_error() {
+        let head = format!("# infotrack flight log seed=3 motion=cv\n{HEADER}\n");
+        let row = "0.33,1,2,-1.2,0,0,0,1,1,0.5,0.6,0.5,0.6,0.01,0,0.01,400,0.1,tracking,goto,0.5,0.7,3.2,Offboard,";
+        let cut = &row[..40];
+        let (_, _, steps) = parse(&format!("{head}{row}\n{row}\n{cut}"), "f").unwrap();
+        assert_eq!(steps.len(), 2);
+        let e = parse(&format!("{head}{row}\n{cut}\n{row}\n"), "f")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 4"), "{e}");
+    }
 
     #[test]
     fn bad_logs_name_the_line() {

@@ -20,6 +20,7 @@
 pub mod flight_log;
 pub mod pipeline;
 pub mod pose_history;
+pub mod recorder;
 pub mod replay;
 
 use std::path::PathBuf;
@@ -41,6 +42,7 @@ use crate::mock::server::{spawn, Faults, MockHandle};
 use crate::mock::MockConfig;
 use crate::vision::camera_model::VehiclePoseNed;
 use pipeline::{Command, PipelineOutput, Ready, Shared, VehicleSnapshot};
+use recorder::FlightRecorder;
 
 /// Why the daemon stopped with an error.
 #[derive(Debug, Error)]
@@ -51,6 +53,9 @@ pub enum DaemonError {
     /// The pipeline (camera, detector, model) could not start.
     #[error(transparent)]
     Pipeline(#[from] pipeline::PipelineError),
+    /// The flight's records cannot be written where asked.
+    #[error(transparent)]
+    Records(#[from] recorder::RecorderError),
     /// SIGINT or SIGTERM before tracking began.
     #[error("stopped by a signal {0}")]
     Interrupted(&'static str),
@@ -98,6 +103,9 @@ pub struct RunOptions {
     pub motion: String,
     /// Telemetry log to write, if any.
     pub tlog: Option<PathBuf>,
+    /// Folder the flight's records (`steps.csv`, `flight.csv`, `summary.json`) are
+    /// written into as the flight goes, if any.
+    pub records_dir: Option<PathBuf>,
     /// Print the status line every second on stderr.
     pub status_line: bool,
     /// Faults to inject during the flight (tests, demonstrations).
@@ -362,12 +370,22 @@ async fn start_pipeline(
     let (ready_tx, ready_rx) = mpsc::channel();
     let (tick_tx, tick_rx) = mpsc::channel();
     let (done_tx, done_rx) = mpsc::channel();
+    let recorder = opts
+        .records_dir
+        .as_deref()
+        .map(|d| FlightRecorder::open(d, opts.seed, &opts.motion))
+        .transpose()?;
     let thread = {
-        let (cfg, shared, motion, seed) =
-            (cfg.clone(), shared.clone(), opts.motion.clone(), opts.seed);
+        let start = pipeline::Start {
+            cfg: cfg.clone(),
+            motion_name: opts.motion.clone(),
+            seed: opts.seed,
+            recorder,
+        };
+        let shared = shared.clone();
         std::thread::Builder::new()
             .name("pipeline".into())
-            .spawn(move || pipeline::run(cfg, motion, seed, shared, ready_tx, tick_rx, done_tx))
+            .spawn(move || pipeline::run(start, shared, ready_tx, tick_rx, done_tx))
             .map_err(DaemonError::PipelineThread)?
     };
     let ready = tokio::task::spawn_blocking(move || ready_rx.recv())

@@ -137,6 +137,8 @@ pub struct FlightRecord {
 pub struct PipelineOutput {
     /// One per filter step.
     pub records: Vec<FlightRecord>,
+    /// Why the records on disk stopped early (a full disk), if they did.
+    pub records_failure: Option<String>,
     /// Filter step times, ms.
     pub filter_ms: Vec<f64>,
     /// Guidance decision times, ms.
@@ -365,6 +367,8 @@ struct Pipeline {
     last_pose: Option<VehiclePoseNed>,
     /// Detection plus filter time of the latest frame, ms.
     last_frame_ms: f64,
+    /// Writes each record as it is made.
+    recorder: Option<super::recorder::FlightRecorder>,
 }
 
 /// Why the pipeline could not start.
@@ -432,10 +436,15 @@ impl Pipeline {
             out: PipelineOutput::default(),
             last_pose: None,
             last_frame_ms: 0.0,
+            recorder: None,
         })
     }
 
     fn finish(mut self) -> PipelineOutput {
+        if let Some(rec) = self.recorder.as_mut() {
+            rec.sync();
+            self.out.records_failure = rec.failure().map(str::to_string);
+        }
         self.out.vision = self.sensor.synthetic.camera.stats;
         self.out.frames_missed = self.sensor.frames_missed;
         self.out
@@ -524,6 +533,9 @@ impl Pipeline {
             faults,
             step: step.record,
         });
+        if let (Some(rec), Some(last)) = (self.recorder.as_mut(), self.out.records.last()) {
+            rec.record(last, &self.out.records);
+        }
     }
 
     fn apply(&mut self, decision: Decision) {
@@ -566,19 +578,35 @@ impl Pipeline {
     }
 }
 
+/// What the pipeline thread is started with.
+pub struct Start {
+    /// The configuration.
+    pub cfg: Config,
+    /// Motion model of the filter.
+    pub motion_name: String,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Where the records go as the flight goes, if anywhere.
+    pub recorder: Option<super::recorder::FlightRecorder>,
+}
+
 /// Builds everything and reports on `ready`; then runs one physics tick for every message on
 /// `ticks` and answers each on `done`, until `ticks` closes. The clock is the caller's: the
 /// supervisor sends ticks on the runtime's clock, wall-clock in the field and simulated in
 /// `infotrack sim --closed-loop`.
 pub fn run(
-    cfg: Config,
-    motion_name: String,
-    seed: u64,
+    start: Start,
     shared: Arc<Shared>,
     ready: mpsc::Sender<Ready>,
     ticks: mpsc::Receiver<()>,
     done: mpsc::Sender<()>,
 ) -> PipelineOutput {
+    let Start {
+        cfg,
+        motion_name,
+        seed,
+        recorder,
+    } = start;
     let mut p = match Pipeline::build(cfg, &motion_name, seed, shared) {
         Ok(p) => p,
         Err(e) => {
@@ -586,6 +614,7 @@ pub fn run(
             return PipelineOutput::default();
         }
     };
+    p.recorder = recorder;
     let _ = ready.send(Ready::Ok);
     while ticks.recv().is_ok() {
         p.tick();

@@ -15,6 +15,15 @@ pub fn render(steps: &[StepRecord]) -> String {
     s.push_str(HEADER);
     s.push('\n');
     for r in steps {
+        s.push_str(&render_row(r));
+    }
+    s
+}
+
+/// One step as a CSV row, newline included.
+pub fn render_row(r: &StepRecord) -> String {
+    let mut s = String::with_capacity(200);
+    {
         let (zx, zy) = r
             .measurement_enu
             .map(|z| (z.x.to_string(), z.y.to_string()))

@@ -1,0 +1,259 @@
+//! The flight's records on disk as the flight goes: `steps.csv` and `flight.csv` a row per
+//! filter step, buffered and flushed at least once a second (so a SIGKILL, an abort or a
+//! power cut loses at most the last second, and every file parses up to its last complete
+//! row), fsync'd when the tracking state changes and at the end; `summary.json` rewritten
+//! (atomically) every few seconds with the metrics so far. A write that fails (a full disk)
+//! is reported once and the flight goes on: what was written before stays readable.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use super::flight_log;
+use super::pipeline::FlightRecord;
+use crate::metrics::{RunSummary, StepRecord};
+use crate::tracker::TrackState;
+
+/// Longest a complete record waits in memory before it is written.
+pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
+/// How often `summary.json` is rewritten during the flight.
+pub const SUMMARY_EVERY: Duration = Duration::from_secs(5);
+
+/// Writes a flight's records into its folder as they come.
+pub struct FlightRecorder {
+    dir: PathBuf,
+    steps: Option<BufWriter<File>>,
+    flight: Option<BufWriter<File>>,
+    last_flush: Instant,
+    last_summary: Instant,
+    last_state: Option<TrackState>,
+    /// The first write error, if any (the files stop there).
+    failed: Option<String>,
+}
+
+/// A record folder that cannot be opened.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write the flight's records in {path}: {source}")]
+pub struct RecorderError {
+    /// The folder or file.
+    pub path: String,
+    /// Why.
+    pub source: std::io::Error,
+}
+
+fn create(path: &Path) -> Result<BufWriter<File>, RecorderError> {
+    File::create(path)
+        .map(|f| BufWriter::with_capacity(64 * 1024, f))
+        .map_err(|source| RecorderError {
+            path: path.display().to_string(),
+            source,
+        })
+}
+
+/// A folder of its own for a flight under `log_dir`: `<UTC date-time>-<seed>` (with `-2`,
+/// `-3`, ... if that exists), never an existing one.
+pub fn flight_folder(log_dir: &Path, seed: u64) -> Result<PathBuf, RecorderError> {
+    let stamp: String = humantime::format_rfc3339_seconds(std::time::SystemTime::now())
+        .to_string()
+        .chars()
+        .filter(|c| !matches!(c, '-' | ':'))
+        .collect();
+    let err = |source| RecorderError {
+        path: log_dir.display().to_string(),
+        source,
+    };
+    std::fs::create_dir_all(log_dir).map_err(err)?;
+    for k in 1.. {
+        let name = match k {
+            1 => format!("{stamp}-{seed}"),
+            _ => format!("{stamp}-{seed}-{k}"),
+        };
+        let dir = log_dir.join(name);
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(err(e)),
+        }
+    }
+    unreachable!("an unbounded range ends only by returning")
+}
+
+impl FlightRecorder {
+    /// Opens `steps.csv` and `flight.csv` in `dir` (created if needed) and writes their
+    /// headers.
+    pub fn open(dir: &Path, seed: u64, motion: &str) -> Result<Self, RecorderError> {
+        std::fs::create_dir_all(dir).map_err(|source| RecorderError {
+            path: dir.display().to_string(),
+            source,
+        })?;
+        let mut steps = create(&dir.join("steps.csv"))?;
+        let mut flight = create(&dir.join("flight.csv"))?;
+        let header = |w: &mut BufWriter<File>, text: &str, name: &str| {
+            w.write_all(text.as_bytes())
+                .and_then(|()| w.flush())
+                .map_err(|source| RecorderError {
+                    path: dir.join(name).display().to_string(),
+                    source,
+                })
+        };
+        header(
+            &mut steps,
+            &format!("{}\n", crate::report::csv::HEADER),
+            "steps.csv",
+        )?;
+        header(
+            &mut flight,
+            &flight_log::preamble(seed, motion),
+            "flight.csv",
+        )?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            steps: Some(steps),
+            flight: Some(flight),
+            last_flush: Instant::now(),
+            last_summary: Instant::now(),
+            last_state: None,
+            failed: None,
+        })
+    }
+
+    /// The first write error, if the records stopped.
+    pub fn failure(&self) -> Option<&str> {
+        self.failed.as_deref()
+    }
+
+    /// Appends one record; flushes when a second has passed since the last flush, fsyncs
+    /// when the tracking state changed, and rewrites the summary every few seconds from
+    /// `all` (every record so far, this one included).
+    pub fn record(&mut self, r: &FlightRecord, all: &[FlightRecord]) {
+        let row_steps = crate::report::csv::render_row(&r.step);
+        let row_flight = flight_log::render_row(r);
+        self.write(|s, f| {
+            s.write_all(row_steps.as_bytes())?;
+            f.write_all(row_flight.as_bytes())
+        });
+        let phase_change = self.last_state.is_some_and(|s| s != r.state);
+        self.last_state = Some(r.state);
+        if phase_change {
+            self.sync();
+        } else if self.last_flush.elapsed() >= FLUSH_EVERY {
+            self.flush();
+        }
+        if self.last_summary.elapsed() >= SUMMARY_EVERY {
+            self.last_summary = Instant::now();
+            let steps: Vec<StepRecord> = all.iter().map(|r| r.step.clone()).collect();
+            self.write_summary(&RunSummary::from_steps(&steps, &[], &[]));
+        }
+    }
+
+    /// Flushes and fsyncs both files (the end of the flight, a change of phase).
+    pub fn sync(&mut self) {
+        self.flush();
+        self.write(|s, f| {
+            s.get_ref().sync_data()?;
+            f.get_ref().sync_data()
+        });
+    }
+
+    /// `summary.json`, replaced atomically (written beside it, then renamed).
+    pub fn write_summary(&mut self, summary: &RunSummary) {
+        if self.failed.is_some() {
+            return;
+        }
+        let tmp = self.dir.join(".summary.json.tmp");
+        let result = serde_json::to_vec_pretty(summary)
+            .map_err(std::io::Error::other)
+            .and_then(|bytes| {
+                let mut f = File::create(&tmp)?;
+                f.write_all(&bytes)?;
+                f.sync_data()
+            })
+            .and_then(|()| std::fs::rename(&tmp, self.dir.join("summary.json")));
+        if let Err(e) = result {
+            self.fail(format!("summary.json: {e}"));
+        }
+    }
+
+    fn flush(&mut self) {
+        self.last_flush = Instant::now();
+        self.write(|s, f| {
+            s.flush()?;
+            f.flush()
+        });
+    }
+
+    fn write(
+        &mut self,
+        op: impl FnOnce(&mut BufWriter<File>, &mut BufWriter<File>) -> std::io::Result<()>,
+    ) {
+        let (Some(s), Some(f)) = (self.steps.as_mut(), self.flight.as_mut()) else {
+            return;
+        };
+        if let Err(e) = op(s, f) {
+            self.fail(e.to_string());
+        }
+    }
+
+    /// Stops writing after the first error: reported once, the flight goes on, and the
+    /// files keep what reached the disk (at worst a last line cut short, which the readers
+    /// skip).
+    fn fail(&mut self, why: String) {
+        tracing::error!(
+            "flight records in {}: {why}; the flight goes on, its records stop here (disk full?)",
+            self.dir.display()
+        );
+        self.failed = Some(why);
+        // Dropping a BufWriter flushes it; after an error that would only fail again.
+        if let Some(w) = self.steps.take() {
+            let _ = w.into_parts();
+        }
+        if let Some(w) = self.flight.take() {
+            let _ = w.into_parts();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_flight_gets_a_new_folder_named_by_time_and_seed() {
+        let root = tempfile::tempdir().unwrap();
+        let a = flight_folder(root.path(), 7).unwrap();
+        let b = flight_folder(root.path(), 7).unwrap();
+        assert_ne!(a, b);
+        let name = a.file_name().unwrap().to_str().unwrap().to_string();
+        // e.g. 20261123T171502Z-7
+        assert!(
+            name.ends_with("Z-7") && name.len() == "20261123T171502Z-7".len(),
+            "{name}"
+        );
+        assert!(b.to_str().unwrap().ends_with("-7-2") || b.to_str().unwrap().ends_with("Z-7"));
+    }
+
+    #[test]
+    fn a_full_disk_is_reported_once_and_nothing_panics() {
+        // /dev/full accepts the open and fails every write with ENOSPC.
+        if !Path::new("/dev/full").exists() {
+            panic!("this test needs /dev/full (Linux)");
+        }
+        let root = tempfile::tempdir().unwrap();
+        let mut r = FlightRecorder::open(root.path(), 1, "cv").unwrap();
+        r.steps = Some(BufWriter::with_capacity(
+            16,
+            File::create("/dev/full").unwrap(),
+        ));
+        r.write(|s, _| s.write_all(&[b'x'; 64]));
+        assert!(
+            r.failure().unwrap().contains("No space left"),
+            "{:?}",
+            r.failure()
+        );
+        // Later writes are no-ops; the summary is not attempted.
+        r.sync();
+        r.write_summary(&RunSummary::from_steps(&[], &[], &[]));
+        assert!(!root.path().join("summary.json").exists());
+    }
+}
