@@ -190,3 +190,70 @@ fn bad_inputs_fail_with_the_file_named() {
         "{err}"
     );
 }
+
+/// The fault campaign's rows: a folder with an unreadable file stopped at it and printed
+/// nothing of the good ones; a truncated video gave half its frames silently. Now every good
+/// frame is reported, each bad file is named, and the exit status says something failed.
+#[test]
+fn a_bad_file_in_a_folder_is_named_and_the_good_ones_still_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    cv_io::write_image(&frames.join("a.png"), &frame(&setup(5))).unwrap();
+    std::fs::write(frames.join("b.png"), b"\x89PNG broken").unwrap();
+    cv_io::write_image(&frames.join("c.png"), &frame(&setup(6))).unwrap();
+    let out = infotrack()
+        .arg("detect")
+        .arg(&frames)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("b.png") && err.contains("1 problem"), "{err}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let ids: Vec<u64> = v["detections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["id"].as_u64().unwrap())
+        .collect();
+    assert_eq!(ids, vec![5, 6]);
+}
+
+#[test]
+fn a_video_cut_short_says_so() {
+    use opencv::prelude::*;
+    use opencv::videoio::VideoWriter;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("flight.avi");
+    let img = frame(&setup(3));
+    let mut w = VideoWriter::new(
+        &path.display().to_string(),
+        VideoWriter::fourcc('F', 'F', 'V', '1').unwrap(),
+        10.0,
+        opencv::core::Size::new(640, 480),
+        false,
+    )
+    .unwrap();
+    assert!(w.is_opened().unwrap(), "OpenCV has no FFV1 writer");
+    for _ in 0..20 {
+        w.write(&cv_io::mat_from_gray(&img).unwrap()).unwrap();
+    }
+    w.release().unwrap();
+    let whole = infotrack().arg("detect").arg(&path).output().unwrap();
+    assert!(
+        whole.status.success(),
+        "{}",
+        String::from_utf8_lossy(&whole.stderr)
+    );
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let cut = infotrack().arg("detect").arg(&path).output().unwrap();
+    let err = String::from_utf8_lossy(&cut.stderr);
+    assert!(!cut.status.success(), "{err}");
+    assert!(
+        err.contains("ended after") && err.contains("of the 20 frames"),
+        "{err}"
+    );
+}

@@ -154,6 +154,52 @@ fn a_model_from_another_world_is_refused_naming_both_unless_allowed() {
     Dmmn::load(&model, &moved.motion_params()).unwrap();
 }
 
+/// The fault campaign's model with NaN weights loaded and flew degraded; now it is refused
+/// at load. The broken copy is made here: the longest run of plausible float32 weights in
+/// the ONNX file (an initializer's raw data) overwritten with NaN.
+#[test]
+fn a_model_with_nan_weights_is_refused_at_load() {
+    let c = lab_config();
+    let mut bytes = std::fs::read(root().join("models/dmmn.onnx")).unwrap();
+    let plausible = |b: &[u8]| {
+        let v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]).abs();
+        (1e-6..50.0).contains(&v)
+    };
+    // Raw data is not 4-byte aligned in the file: try each offset.
+    let mut best = (0, 0);
+    for offset in 0..4 {
+        let (mut start, mut run) = (0, 0);
+        for i in (offset..bytes.len() - 4).step_by(4) {
+            if plausible(&bytes[i..i + 4]) {
+                if run == 0 {
+                    start = i;
+                }
+                run += 1;
+                if run > best.1 {
+                    best = (start, run);
+                }
+            } else {
+                run = 0;
+            }
+        }
+    }
+    assert!(best.1 >= 32, "no weight block found ({} floats)", best.1);
+    for k in 0..best.1 {
+        bytes[best.0 + 4 * k..best.0 + 4 * k + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("nan.onnx");
+    std::fs::write(&model, &bytes).unwrap();
+    std::fs::copy(root().join("models/dmmn.json"), dir.path().join("nan.json")).unwrap();
+    let e = Dmmn::load(&model, &c.motion_params())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("nan.onnx") && e.contains("NaN or infinite"),
+        "{e}"
+    );
+}
+
 #[test]
 fn missing_model_and_wrong_shape_are_clear_errors() {
     let c = lab_config();

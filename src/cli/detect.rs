@@ -31,8 +31,13 @@ fn is_image(p: &Path) -> bool {
         .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
-/// Calls `f` on every frame of `path`, in order.
-fn for_each_frame(path: &Path, mut f: impl FnMut(u64, &GrayImage) -> Result<()>) -> Result<()> {
+/// Calls `f` on every frame of `path`, in order. A file of a folder that cannot be read,
+/// or a video that ends before the frame count its header declares, is a problem returned
+/// (and the rest is still read); anything else stops with an error.
+fn for_each_frame(
+    path: &Path,
+    mut f: impl FnMut(u64, &GrayImage) -> Result<()>,
+) -> Result<Vec<String>> {
     if path.is_dir() {
         let mut files: Vec<PathBuf> = std::fs::read_dir(path)
             .with_context(|| format!("cannot list {}", path.display()))?
@@ -47,16 +52,24 @@ fn for_each_frame(path: &Path, mut f: impl FnMut(u64, &GrayImage) -> Result<()>)
                 IMAGE_EXTENSIONS.join(", ")
             );
         }
+        let mut problems = Vec::new();
         for (i, p) in files.iter().enumerate() {
-            f(i as u64, &cv_io::read_image(p)?)?;
+            match cv_io::read_image(p) {
+                Ok(img) => f(i as u64, &img)?,
+                Err(e) => {
+                    eprintln!("error: frame {i}: {e}; going on with the next file");
+                    problems.push(e.to_string());
+                }
+            }
         }
-        return Ok(());
+        return Ok(problems);
     }
     if !path.exists() {
         bail!("{}: no such file or folder", path.display());
     }
     if is_image(path) {
-        return f(0, &cv_io::read_image(path)?);
+        f(0, &cv_io::read_image(path)?)?;
+        return Ok(Vec::new());
     }
     let mut cam = Camera::open(CaptureConfig {
         source: path.display().to_string(),
@@ -76,7 +89,13 @@ fn for_each_frame(path: &Path, mut f: impl FnMut(u64, &GrayImage) -> Result<()>)
             path.display()
         );
     }
-    Ok(())
+    match cam.declared_frames() {
+        Some(declared) if n < declared => Ok(vec![format!(
+            "{}: the video ended after {n} of the {declared} frames its header declares (truncated?)",
+            path.display()
+        )]),
+        _ => Ok(Vec::new()),
+    }
 }
 
 pub fn run(
@@ -93,7 +112,7 @@ pub fn run(
     let mut det = AprilTagDetector::new(DetectorConfig::default())?;
     let noise = ProjectionNoise::default();
     let mut all = Vec::new();
-    for_each_frame(&path, |frame, img| {
+    let problems = for_each_frame(&path, |frame, img| {
         if let Some((cam, _)) = &camera {
             let (w, h) = (
                 cam.intrinsics.width_px as usize,
@@ -144,6 +163,16 @@ pub fn run(
             println!();
         }
         println!("{} detection(s)", all.len());
+    }
+    if !problems.is_empty() {
+        for p in &problems {
+            eprintln!("error: {p}");
+        }
+        bail!(
+            "{}: {} problem(s) reading the input (the detections above are from what could be read)",
+            path.display(),
+            problems.len()
+        );
     }
     Ok(())
 }

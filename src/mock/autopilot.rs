@@ -444,6 +444,25 @@ impl MockAutopilot {
         use MavResult::*;
         let mut out = Vec::new();
         let result = match c.command {
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL if !c.param1.is_finite() => {
+                out.push(self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    "SET_MESSAGE_INTERVAL: message id is not a number",
+                ));
+                MAV_RESULT_DENIED
+            }
+            // PX4 treats an interval that is neither below nor above zero (NaN compares
+            // false both ways) as "the default rate"; ArduPilot casts it to an integer, so
+            // the mock refuses it there.
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
+                if c.param2.is_nan() && self.cfg.flavor == Flavor::ArduPilot =>
+            {
+                out.push(self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    "SET_MESSAGE_INTERVAL: interval is not a number",
+                ));
+                MAV_RESULT_DENIED
+            }
             MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => {
                 let id = c.param1 as u32;
                 if c.param2 < 0.0 {
@@ -470,8 +489,20 @@ impl MockAutopilot {
                     MAV_RESULT_ACCEPTED
                 }
             }
+            // Both firmwares arm on exactly 1 and disarm on exactly 0; anything else (NaN
+            // included) is refused rather than read as one of them.
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if c.param1 != 0.0 && c.param1 != 1.0 => {
+                out.push(self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!("ARM_DISARM: param1 {} is neither 0 nor 1", c.param1),
+                ));
+                match self.cfg.flavor {
+                    Flavor::Px4 => MAV_RESULT_DENIED,
+                    Flavor::ArduPilot => MAV_RESULT_UNSUPPORTED,
+                }
+            }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => {
-                if c.param1 >= 0.5 {
+                if c.param1 == 1.0 {
                     if self.armed {
                         MAV_RESULT_ACCEPTED
                     } else if !self.estimator_ready() {
@@ -562,11 +593,17 @@ impl MockAutopilot {
                 | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Y_IGNORE
                 | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Z_IGNORE,
         );
-        let finite = [sp.x, sp.y, sp.z].iter().all(|v| v.is_finite());
-        if !frame_ok || pos_ignored || !finite {
+        if !frame_ok || pos_ignored {
             out.push(self.statustext(
                 MavSeverity::MAV_SEVERITY_WARNING,
                 "position target ignored: unsupported frame or type_mask",
+            ));
+            return out;
+        }
+        if ![sp.x, sp.y, sp.z].iter().all(|v| v.is_finite()) {
+            out.push(self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "position target ignored: non-finite position",
             ));
             return out;
         }

@@ -230,12 +230,51 @@ impl Dmmn {
         let k_in = metadata.k_in;
         check_outlet(&session, model_path, true, &[-1, k_in as i64, 2])?;
         check_outlet(&session, model_path, false, &[-1, 2])?;
-        Ok(Self {
+        let mut model = Self {
             session,
             k_in,
             input: Vec::new(),
             metadata,
-        })
+        };
+        model.refuse_non_finite(model_path, params)?;
+        Ok(model)
+    }
+
+    /// Runs a probe batch of plausible histories (straight drives through the workspace's
+    /// centre at the world's speeds, four headings) and refuses the model if any prediction
+    /// is NaN or infinite: a model with broken weights would otherwise fly, degraded.
+    fn refuse_non_finite(&mut self, path: &Path, params: &MotionParams) -> Result<(), MotionError> {
+        let (centre, speeds) = match &params.world {
+            Some(w) => {
+                let b = &w.workspace_enu;
+                (
+                    [0.5 * (b.x_min_m + b.x_max_m), 0.5 * (b.y_min_m + b.y_max_m)],
+                    [w.target_speed.cruise_mps, w.target_speed.max_mps],
+                )
+            }
+            None => ([0.0, 0.0], [0.5, 1.0]),
+        };
+        let mut batch = Vec::new();
+        for heading in [0.0f64, 0.5, 1.0, 1.5].map(|q| q * std::f64::consts::PI) {
+            for v in speeds {
+                for k in 0..self.k_in {
+                    // Oldest first, ending at the centre.
+                    let back = (self.k_in - 1 - k) as f64 * v * params.dt_s;
+                    batch.push((centre[0] - back * heading.cos()) as f32);
+                    batch.push((centre[1] - back * heading.sin()) as f32);
+                }
+            }
+        }
+        let n = batch.len() / (2 * self.k_in);
+        let out = self.predict_raw(&batch, n)?;
+        if out.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(err(format!(
+                "model {} predicts NaN or infinite positions for plausible histories (its weights are broken?); refused",
+                path.display()
+            )))
+        }
     }
 
     /// The metadata it was loaded with.

@@ -155,6 +155,8 @@ pub struct Camera {
     /// Stalls seen (timeouts), for reports.
     pub stalls: u64,
     ended: bool,
+    /// Frames a file's header declares (none for live sources or when it does not say).
+    declared_frames: Option<u64>,
 }
 
 impl Camera {
@@ -163,6 +165,10 @@ impl Camera {
         cfg.validate()?;
         let src = CaptureSource::parse(&cfg.source)?;
         let cap = open(&src, &cfg)?;
+        let declared_frames = (!src.is_live())
+            .then(|| cap.get(videoio::CAP_PROP_FRAME_COUNT).unwrap_or(0.0))
+            .filter(|n| n.is_finite() && *n >= 1.0)
+            .map(|n| n as u64);
         let (tx, rx) = mpsc::sync_channel(4);
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let thread = {
@@ -183,6 +189,7 @@ impl Camera {
             thread: Some(thread),
             stalls: 0,
             ended: false,
+            declared_frames,
         })
     }
 
@@ -236,6 +243,11 @@ impl Camera {
     /// Whether a file or sequence has ended.
     pub fn ended(&self) -> bool {
         self.ended
+    }
+
+    /// The frame count a video file's header declares, if it does.
+    pub fn declared_frames(&self) -> Option<u64> {
+        self.declared_frames
     }
 }
 

@@ -459,3 +459,47 @@ fn both_flavours_honour_the_velocity_feed_forward_of_a_moving_target() {
         assert!(trail < 0.5, "{flavor}: trails a moving target by {trail} m");
     }
 }
+
+/// The fault campaign's mock rows: ARM with param1 NaN and SET_MESSAGE_INTERVAL with NaN were
+/// accepted, a NaN setpoint was "unsupported frame or type". Now refused with the reason.
+#[test]
+fn commands_with_non_finite_parameters_are_refused_with_the_reason() {
+    let texts = |out: &[MavMessage]| -> String {
+        out.iter()
+            .filter_map(|m| match m {
+                MavMessage::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
+                _ => None,
+            })
+            .collect()
+    };
+    for flavor in [Flavor::Px4, Flavor::ArduPilot] {
+        let mut m = MockAutopilot::new(MockConfig::new(flavor), 0.0);
+        m.tick(60.0);
+        let arm_nan = cmd(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [f32::NAN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        );
+        let out = m.handle(60.0, &GCS, &arm_nan);
+        assert_ne!(ack_of(&out), MavResult::MAV_RESULT_ACCEPTED, "{flavor:?}");
+        assert!(texts(&out).contains("neither 0 nor 1"), "{}", texts(&out));
+        assert!(!m.armed());
+        let interval = cmd(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            [f32::NAN, 1e5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        );
+        let out = m.handle(60.0, &GCS, &interval);
+        assert_eq!(ack_of(&out), MavResult::MAV_RESULT_DENIED, "{flavor:?}");
+        assert!(texts(&out).contains("message id"), "{}", texts(&out));
+        let out = m.handle(60.0, &GCS, &setpoint([f32::NAN, 0.0, -5.0]));
+        assert!(
+            texts(&out).contains("non-finite position"),
+            "{}",
+            texts(&out)
+        );
+        assert_eq!(
+            arm(&mut m, 60.0),
+            MavResult::MAV_RESULT_ACCEPTED,
+            "{flavor:?}"
+        );
+    }
+}
