@@ -85,7 +85,7 @@ pub enum MockEvent {
 }
 
 /// Message ids of the streamed telemetry.
-const STREAMED: [u32; 6] = [0, 1, 30, 32, 33, 245];
+const STREAMED: [u32; 8] = [0, 1, 30, 32, 33, 245, 242, 49];
 
 /// The mock autopilot.
 #[derive(Debug, Clone)]
@@ -359,6 +359,8 @@ impl MockAutopilot {
     }
 
     /// Handles one received message; returns the replies.
+    // REQUEST_DATA_STREAM is deprecated but stock clients send it (see `stock`).
+    #[allow(deprecated)]
     pub fn handle(&mut self, now_s: f64, from: &MavHeader, msg: &MavMessage) -> Vec<MavMessage> {
         self.now_s = self.now_s.max(now_s);
         let mut out = Vec::new();
@@ -375,6 +377,11 @@ impl MockAutopilot {
                 if self.addressed(sp.target_system, sp.target_component) =>
             {
                 out.extend(self.setpoint(sp));
+            }
+            MavMessage::REQUEST_DATA_STREAM(r)
+                if self.addressed(r.target_system, r.target_component) =>
+            {
+                self.request_data_stream(r);
             }
             MavMessage::PARAM_REQUEST_LIST(r)
                 if self.addressed(r.target_system, r.target_component) =>
@@ -440,6 +447,8 @@ impl MockAutopilot {
 
     // Long because it is one dispatch over the COMMAND_LONG ids the firmware answers, one
     // short arm each, kept together so the table of supported commands reads at a glance.
+    // MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES is deprecated but stock clients send it.
+    #[allow(deprecated)]
     fn command(&mut self, from: &MavHeader, c: &COMMAND_LONG_DATA) -> Vec<MavMessage> {
         use MavResult::*;
         let mut out = Vec::new();
@@ -534,8 +543,31 @@ impl MockAutopilot {
                     MAV_RESULT_ACCEPTED
                 }
             }
+            MavCmd::MAV_CMD_REQUEST_MESSAGE => match self.requested_message(c.param1 as u32) {
+                Some(m) => {
+                    out.push(m);
+                    MAV_RESULT_ACCEPTED
+                }
+                None => MAV_RESULT_UNSUPPORTED,
+            },
+            MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES => {
+                out.push(self.autopilot_version());
+                MAV_RESULT_ACCEPTED
+            }
+            // Landing where it is (both: LAND mode), then disarming on the ground (tick).
+            MavCmd::MAV_CMD_NAV_LAND if self.armed => {
+                self.set_mode_internal(Mode::Land);
+                MAV_RESULT_ACCEPTED
+            }
+            MavCmd::MAV_CMD_NAV_LAND => MAV_RESULT_FAILED,
             MavCmd::MAV_CMD_NAV_TAKEOFF => {
-                let alt = c.param7 as f64;
+                // PX4 reads a NaN altitude (what MAVSDK's action.takeoff sends) as "the
+                // configured take-off altitude", MIS_TAKEOFF_ALT above home.
+                let alt = if c.param7.is_nan() && self.cfg.flavor == Flavor::Px4 {
+                    self.params.get("MIS_TAKEOFF_ALT", 2.5) - self.home_ned_m[2]
+                } else {
+                    c.param7 as f64
+                };
                 if !self.armed || alt.is_nan() || alt <= 0.0 {
                     MAV_RESULT_FAILED
                 } else {
@@ -843,13 +875,10 @@ impl MockAutopilot {
         let has_origin = self.estimator_ready();
         Some(match id {
             0 => self.heartbeat(),
-            1 => MavMessage::SYS_STATUS(SYS_STATUS_DATA {
-                voltage_battery: 16_000,
-                current_battery: if self.armed { 1_500 } else { 50 },
-                battery_remaining: 90,
-                load: 300,
-                ..Default::default()
-            }),
+            1 => self.sys_status(),
+            stock::HOME_POSITION_ID | stock::GPS_GLOBAL_ORIGIN_ID => {
+                return self.origin_message(id)
+            }
             30 => {
                 let (roll, pitch) = s.attitude(self.yaw_ned_rad);
                 MavMessage::ATTITUDE(ATTITUDE_DATA {
@@ -918,6 +947,8 @@ impl MockAutopilot {
         (lat, lon)
     }
 }
+
+mod stock;
 
 #[cfg(test)]
 mod tests;

@@ -48,6 +48,7 @@ impl ParamTable {
                 p("MPC_Z_VEL_MAX_UP", 3.0, Real32),
                 p("MPC_Z_VEL_MAX_DN", 1.5, Real32),
                 p("MPC_TKO_SPEED", 1.5, Real32),
+                p("MIS_TAKEOFF_ALT", 2.5, Real32),
                 p("GF_ACTION", 1.0, Int32),
                 p("GF_MAX_HOR_DIST", 0.0, Real32),
                 p("GF_MAX_VER_DIST", 0.0, Real32),
