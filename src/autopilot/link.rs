@@ -1160,6 +1160,49 @@ fn on_message(
     }
 }
 
+/// The link's message handling without a socket, for the fuzz tests (`tests/fuzz_mavlink.rs`):
+/// messages go through the same `on_message` the reader task calls.
+#[doc(hidden)]
+pub mod fuzz {
+    use super::*;
+
+    /// A vehicle state fed directly.
+    pub struct LinkUnderTest {
+        state: Mutex<VehicleState>,
+        events: broadcast::Sender<LinkEvent>,
+    }
+
+    impl LinkUnderTest {
+        /// A link with our ids 1/191 and no configured vehicle.
+        pub fn new() -> Self {
+            Self {
+                state: Mutex::new(VehicleState::default()),
+                events: broadcast::channel(16).0,
+            }
+        }
+
+        /// The state so far.
+        pub fn state(&self) -> VehicleState {
+            self.state.lock().expect("state poisoned").clone()
+        }
+    }
+
+    impl Default for LinkUnderTest {
+        fn default() -> Self {
+            Self::new()
+        }
+    }
+
+    /// One received message, as the reader task hands it over.
+    pub fn feed(link: &mut LinkUnderTest, h: MavHeader, m: &MavMessage) {
+        let ids = Ids {
+            me: (1, 191),
+            vehicle: None,
+        };
+        on_message(&link.state, &link.events, ids, &h, m);
+    }
+}
+
 /// Our ids and the vehicle's, if configured.
 #[derive(Debug, Clone, Copy)]
 struct Ids {
