@@ -114,6 +114,32 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
     assert!(msgs
         .iter()
         .any(|(_, h, m)| h.component_id == 191 && matches!(m, MavMessage::HEARTBEAT(_))));
+    // The ground station hears the tracker: its events as STATUSTEXT, its state as
+    // NAMED_VALUE_FLOAT once a second.
+    let ours: Vec<&MavMessage> = msgs
+        .iter()
+        .filter(|(_, h, _)| h.component_id == 191)
+        .map(|(_, _, m)| m)
+        .collect();
+    let texts: Vec<String> = ours
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
+            _ => None,
+        })
+        .collect();
+    for want in [
+        "infotrack: tracking started (dmmn)",
+        "infotrack: target acquired",
+        "infotrack: stopped (duration), vehicle in hold",
+    ] {
+        assert!(texts.iter().any(|t| t == want), "`{want}` not in {texts:?}");
+    }
+    let neff = ours
+        .iter()
+        .filter(|m| matches!(m, MavMessage::NAMED_VALUE_FLOAT(v) if v.name.to_str().unwrap_or("") == "IT_NEFF"))
+        .count();
+    assert!((80..=95).contains(&neff), "{neff} IT_NEFF values in 90 s");
     replays_exactly(&cfg, &r);
 
     // `infotrack sim --vision` (same frames, detector and filter, but an ideal agent and no

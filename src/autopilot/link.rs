@@ -466,6 +466,8 @@ pub struct VehicleLink {
     streamer: Arc<Streamer>,
     tlog: Option<Arc<super::tlog::Tlog>>,
     tasks: Vec<JoinHandle<()>>,
+    /// When the link was opened (our uptime for time_boot_ms).
+    started: Instant,
 }
 
 impl Drop for VehicleLink {
@@ -548,6 +550,7 @@ impl VehicleLink {
             streamer,
             tlog,
             tasks: vec![reader, heartbeat, watchdog, stream],
+            started: Instant::now(),
         })
     }
 
@@ -612,6 +615,32 @@ impl VehicleLink {
             .await
             .map(|_| ())
             .map_err(|e| LinkError::Send(e.to_string()))
+    }
+
+    /// A STATUSTEXT to the ground station (cut to MAVLink's 50 characters).
+    pub async fn send_statustext(
+        &self,
+        severity: MavSeverity,
+        text: &str,
+    ) -> Result<(), LinkError> {
+        let cut: String = text.chars().take(50).collect();
+        self.send(&MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+            severity,
+            text: cut.as_str().into(),
+            ..Default::default()
+        }))
+        .await
+    }
+
+    /// A NAMED_VALUE_FLOAT (name cut to 10 characters), time-stamped with our uptime.
+    pub async fn send_named_value(&self, name: &str, value: f32) -> Result<(), LinkError> {
+        let cut: String = name.chars().take(10).collect();
+        self.send(&MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+            time_boot_ms: self.started.elapsed().as_millis() as u32,
+            name: cut.as_str().into(),
+            value,
+        }))
+        .await
     }
 
     /// COMMAND_LONG with retries; Ok only for MAV_RESULT_ACCEPTED.

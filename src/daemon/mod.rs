@@ -18,6 +18,7 @@
 //! ([`run_simulated`]) the whole daemon flies faster than real time through the same code.
 
 pub mod flight_log;
+pub mod gcs_report;
 pub mod pipeline;
 pub mod pose_history;
 pub mod recorder;
@@ -547,6 +548,7 @@ struct Supervisor<'a> {
     was_lost: bool,
     fault_active: Vec<bool>,
     last_status: Instant,
+    gcs: gcs_report::GcsReporter,
 }
 
 /// Phase 4: steps the pipeline on the runtime's clock and, every 20 ms, feeds it the
@@ -582,7 +584,10 @@ async fn track(
         was_lost: false,
         fault_active: vec![false; opts.faults.len()],
         last_status: Instant::now(),
+        gcs: gcs_report::GcsReporter::new(&cfg.daemon.target_lost_fallback),
     };
+    let (severity, text) = gcs_report::GcsReporter::started(&opts.motion);
+    sup.tell_gcs(severity, &text).await;
     let stopped_by = loop {
         tokio::select! {
             _ = &mut *signal => break StopReason::Signal,
@@ -600,6 +605,7 @@ async fn track(
         let snap = sup.feed_vehicle_state();
         sup.apply_command(snap);
         sup.print_status();
+        sup.report_to_gcs().await;
     };
     Tracked {
         stopped_by,
@@ -717,6 +723,35 @@ impl Supervisor<'_> {
         self.applied = cmd;
     }
 
+    /// Tells the ground station what changed, and the tracker's values once a second
+    /// (`gcs_report`).
+    async fn report_to_gcs(&mut self) {
+        let Some(status) = self.shared.pipeline_view().status else {
+            return;
+        };
+        if self.was_lost {
+            return;
+        }
+        for (severity, text) in self.gcs.events(&status) {
+            self.tell_gcs(severity, &text).await;
+        }
+        if let Some(values) = self.gcs.values_due(&status, Instant::now()) {
+            for (name, value) in values {
+                if let Err(e) = self.vehicle.link.send_named_value(name, value).await {
+                    tracing::debug!("NAMED_VALUE_FLOAT {name}: {e}");
+                }
+            }
+        }
+    }
+
+    /// One STATUSTEXT to the ground station (and the log).
+    async fn tell_gcs(&self, severity: mavlink::dialects::ardupilotmega::MavSeverity, text: &str) {
+        tracing::info!("{text}");
+        if let Err(e) = self.vehicle.link.send_statustext(severity, text).await {
+            tracing::debug!("STATUSTEXT `{text}`: {e}");
+        }
+    }
+
     /// The status line, once a second, when asked for.
     fn print_status(&mut self) {
         if !self.opts.status_line || self.last_status.elapsed() < Duration::from_secs(1) {
@@ -760,6 +795,16 @@ async fn stop(
     let link = &vehicle.link;
     if let Err(e) = link.hold().await {
         tracing::error!("could not put the vehicle in hold: {e}");
+    } else {
+        let why = match tracked.stopped_by {
+            StopReason::Duration => "duration",
+            StopReason::Signal => "signal",
+            StopReason::Fault => "fault",
+        };
+        let (severity, text) = gcs_report::GcsReporter::stopped(why);
+        if let Err(e) = link.send_statustext(severity, &text).await {
+            tracing::debug!("STATUSTEXT `{text}`: {e}");
+        }
     }
     let output = match joined {
         Ok(Ok(output)) => output,

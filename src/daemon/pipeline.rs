@@ -50,6 +50,8 @@ pub struct Status {
     pub entropy: f64,
     /// Tracking state.
     pub state: TrackState,
+    /// The estimate's uncertainty: one standard deviation along its widest axis, m.
+    pub radius_m: f64,
 }
 
 /// What the supervisor tells the pipeline, rewritten every 20 ms.
@@ -519,6 +521,13 @@ impl Pipeline {
             n_eff: step.record.n_eff,
             entropy: step.entropy,
             state: step.state,
+            radius_m: step
+                .record
+                .cov_m2
+                .symmetric_eigenvalues()
+                .max()
+                .max(0.0)
+                .sqrt(),
         });
         self.out.records.push(FlightRecord {
             pose: self
