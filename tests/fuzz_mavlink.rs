@@ -56,14 +56,25 @@ proptest! {
     #[test]
     fn the_link_state_stays_finite_and_locked_whatever_arrives(msgs in messages()) {
         let mut link = LinkUnderTest::new();
-        let first_autopilot = msgs.iter().find_map(|(s, c, m)| match m {
-            MavMessage::HEARTBEAT(h) if matches!(
-                h.autopilot,
-                mavlink::dialects::ardupilotmega::MavAutopilot::MAV_AUTOPILOT_PX4
-                    | mavlink::dialects::ardupilotmega::MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA
-            ) => Some((*s, *c)),
-            _ => None,
-        });
+        // The lock: the first autopilot heard, whose own system's component 1 (the flight
+        // controller) takes over if it speaks later; no other system ever.
+        let mut first_autopilot: Option<(u8, u8)> = None;
+        for (s, c, m) in &msgs {
+            if let MavMessage::HEARTBEAT(h) = m {
+                let autopilot = matches!(
+                    h.autopilot,
+                    mavlink::dialects::ardupilotmega::MavAutopilot::MAV_AUTOPILOT_PX4
+                        | mavlink::dialects::ardupilotmega::MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA
+                );
+                match first_autopilot {
+                    None if autopilot => first_autopilot = Some((*s, *c)),
+                    Some((ls, _)) if autopilot && ls == *s && *c == 1 => {
+                        first_autopilot = Some((*s, 1))
+                    }
+                    _ => {}
+                }
+            }
+        }
         for (sys, comp, m) in &msgs {
             feed(&mut link, MavHeader { system_id: *sys as u32, component_id: *comp, sequence: 0 }, m);
         }

@@ -1243,9 +1243,13 @@ struct Ids {
 /// the first heard. Any other is ignored and reported once; a vehicle that reboots keeps its
 /// ids and stays the vehicle.
 fn lock_onto(s: &mut VehicleState, configured: Option<(u8, u8)>, sender: (u8, u8)) -> bool {
+    /// MAV_COMP_ID_AUTOPILOT1: the flight controller itself.
+    const AUTOPILOT: u8 = 1;
     let ours = match (s.address, configured) {
-        (Some(locked), _) => locked == sender,
-        (None, Some(wanted)) => wanted == sender,
+        (_, Some(wanted)) => wanted == sender,
+        // Another component of the same system that calls itself an autopilot heard first
+        // (a camera or gimbal manager): the flight controller's own component wins.
+        (Some(locked), None) => locked == sender || (locked.0 == sender.0 && sender.1 == AUTOPILOT),
         (None, None) => true,
     };
     if ours {
@@ -1345,6 +1349,20 @@ mod tests {
             s.ignored_autopilots.iter().copied().collect::<Vec<_>>(),
             vec![(42, 1)]
         );
+        // A component of the vehicle's system that claims to be an autopilot, heard first,
+        // gives way to the flight controller's component 1; system 42 never gets in.
+        let s = feed(
+            None,
+            &[
+                (header(1, 100), autopilot_heartbeat()),
+                (header(42, 1), autopilot_heartbeat()),
+                (header(1, 1), autopilot_heartbeat()),
+                (header(1, 1), position(7.0)),
+                (header(1, 100), autopilot_heartbeat()),
+            ],
+        );
+        assert_eq!(s.address, Some((1, 1)));
+        assert_eq!(s.local_ned.unwrap().1.x_north_m, 7.0);
         // Heard first, system 42 would have been the vehicle; configured, only system 5 is.
         let s = feed(
             Some((5, 1)),
