@@ -217,3 +217,98 @@ async fn arducopter_flies_the_lab_and_brakes_after_the_flight() {
     assert_eq!(mode, Some(Mode::Brake));
     assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
 }
+
+/// `infotrack params apply` then `params check` with a shipped parameter file, against the
+/// firmware: every parameter written and read back equal.
+fn params_round_trip(url: &str, file: &Path) -> String {
+    let run = |action: &str| {
+        Command::new(env!("CARGO_BIN_EXE_infotrack"))
+            .args(["params", action])
+            .arg(file)
+            .args(["--connect", url, "--timeout", "60"])
+            .output()
+            .unwrap()
+    };
+    let applied = run("apply");
+    let out = String::from_utf8_lossy(&applied.stdout).into_owned();
+    assert!(
+        applied.status.success(),
+        "params apply failed\n{out}\n{}",
+        String::from_utf8_lossy(&applied.stderr)
+    );
+    let checked = run("check");
+    let check = String::from_utf8_lossy(&checked.stdout).into_owned();
+    assert!(
+        checked.status.success(),
+        "params check after apply\n{check}"
+    );
+    assert!(
+        check.contains(", 0 not as the file says"),
+        "params check after apply\n{check}"
+    );
+    eprintln!("SITL params {}:\n{check}", file.display());
+    check
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the SITL builds: run by scripts/sitl-test.sh"]
+async fn px4_takes_the_shipped_parameter_file() {
+    let _px4 = start("px4/start.sh", &["0", "offboard=14541"]);
+    let shipped =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware-params/px4-offboard-tracking.params");
+    // The SITL build has no serial ports: their two parameters are not on it, and the file
+    // is then applied not at all (nothing half-written).
+    let whole = {
+        let shipped = shipped.clone();
+        tokio::task::spawn_blocking(move || {
+            Command::new(env!("CARGO_BIN_EXE_infotrack"))
+                .args(["params", "apply"])
+                .arg(&shipped)
+                .args(["--connect", "udpin:127.0.0.1:14541", "--timeout", "60"])
+                .output()
+                .unwrap()
+        })
+        .await
+        .unwrap()
+    };
+    let out = String::from_utf8_lossy(&whole.stdout).into_owned();
+    assert!(!whole.status.success(), "{out}");
+    assert!(
+        out.contains("MAV_1_CONFIG")
+            && out.contains("NOT ON VEHICLE")
+            && out.contains("not written"),
+        "{out}"
+    );
+    assert!(!out.contains("applied"), "{out}");
+    // Without the serial-port lines it is applied whole and reads back equal.
+    let dir = tempfile::tempdir().unwrap();
+    let sitl_file = dir.path().join("px4-sitl.params");
+    let text: String = std::fs::read_to_string(&shipped)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.contains("MAV_1_CONFIG") && !l.contains("SER_TEL2_BAUD"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&sitl_file, text).unwrap();
+    let check =
+        tokio::task::spawn_blocking(move || params_round_trip("udpin:127.0.0.1:14541", &sitl_file))
+            .await
+            .unwrap();
+    assert!(check.contains("COM_OF_LOSS_T"), "{check}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the SITL builds: run by scripts/sitl-test.sh"]
+async fn arducopter_takes_the_shipped_parameter_file() {
+    let _ac = start("arducopter/start.sh", &["1", "serial0=tcp:0"]);
+    let check = tokio::task::spawn_blocking(|| {
+        params_round_trip(
+            "tcpout:127.0.0.1:5772",
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("firmware-params/ardupilot-guided-tracking.parm"),
+        )
+    })
+    .await
+    .unwrap();
+    assert!(check.contains("GUID_TIMEOUT"), "{check}");
+}
