@@ -18,9 +18,10 @@ use infotrack::sim::{EstimatorKind, MonteCarlo};
     about = "Find and follow a hidden moving ground target from a drone"
 )]
 struct Cli {
-    /// Log filter (tracing syntax), e.g. `warn`, `infotrack=debug`.
-    #[arg(long, global = true, default_value = "warn")]
-    log: String,
+    /// Log filter (tracing syntax), e.g. `warn`, `infotrack=debug`; without it, the
+    /// `RUST_LOG` environment variable, else `warn`.
+    #[arg(long, global = true)]
+    log: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -219,15 +220,22 @@ use cli::{detect, run_cmd};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let filter = tracing_subscriber::EnvFilter::try_new(&cli.log).unwrap_or_else(|_| {
-        eprintln!(
-            "warning: --log `{}` is not a valid filter; using `warn`",
-            cli.log
-        );
+    let (filter, origin) = match &cli.log {
+        Some(f) => (f.clone(), "--log"),
+        None => match std::env::var("RUST_LOG") {
+            Ok(f) if !f.trim().is_empty() => (f, "RUST_LOG"),
+            _ => ("warn".to_string(), "the default"),
+        },
+    };
+    let filter = tracing_subscriber::EnvFilter::try_new(&filter).unwrap_or_else(|_| {
+        eprintln!("warning: {origin} `{filter}` is not a valid log filter; using `warn`");
         tracing_subscriber::EnvFilter::new("warn")
     });
+    // Colour codes only on a terminal: a journal or a log file gets plain text.
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     tracing_subscriber::fmt()
         .with_env_filter(filter)
+        .with_ansi(ansi)
         .with_writer(std::io::stderr)
         .init();
     let result = match cli.command {

@@ -270,3 +270,40 @@ fn sim_closed_loop_flies_the_daemon_on_the_simulated_clock() {
         assert!(e.contains(want), "{args:?}: {e}");
     }
 }
+
+/// As under systemd: `RUST_LOG` is honoured when `--log` is not given, and a log read from
+/// a pipe (the journal) carries no colour codes; the run summary is in words.
+#[test]
+fn rust_log_is_honoured_and_piped_logs_are_plain_text() {
+    let o = infotrack()
+        .args(["sim", "--closed-loop", "--duration", "3", "--seed", "2"])
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("INFO") && err.contains("infotrack: tracking started"),
+        "RUST_LOG=info ignored:\n{err}"
+    );
+    assert!(!err.contains('\u{1b}'), "colour codes in a piped log:\n{err}");
+    assert!(
+        out.contains("vehicle: ended in HOLD") && !out.contains("Some("),
+        "{out}"
+    );
+    // --log wins over RUST_LOG; a bad filter is named with where it came from.
+    let o = infotrack()
+        .args(["sim", "--runs", "1", "--duration", "2", "--quiet"])
+        .env("RUST_LOG", "not a [filter")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("RUST_LOG `not a [filter`"), "{err}");
+    let o = infotrack()
+        .args(["sim", "--runs", "1", "--duration", "2", "--quiet", "--log", "error"])
+        .env("RUST_LOG", "not a [filter")
+        .output()
+        .unwrap();
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("RUST_LOG"));
+}

@@ -66,6 +66,27 @@ pub enum Mode {
     Other(u32),
 }
 
+/// The mode in words for people (the run summary, messages): the name both firmwares'
+/// ground stations show where they agree, the pair where they differ.
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Mode::Position => f.write_str("POSITION (PX4 POSCTL / ArduPilot LOITER)"),
+            Mode::Takeoff => f.write_str("TAKEOFF"),
+            Mode::Hold => f.write_str("HOLD (PX4 AUTO.LOITER / ArduPilot LOITER)"),
+            Mode::ReturnToLaunch => f.write_str("RTL"),
+            Mode::Land => f.write_str("LAND"),
+            Mode::Offboard => f.write_str("OFFBOARD"),
+            Mode::Guided => f.write_str("GUIDED"),
+            Mode::Brake => f.write_str("BRAKE"),
+            Mode::Altitude => f.write_str("ALTITUDE (PX4 ALTCTL / ArduPilot ALT_HOLD)"),
+            Mode::Stabilized => f.write_str("STABILIZED"),
+            Mode::Manual => f.write_str("MANUAL"),
+            Mode::Other(n) => write!(f, "mode {n}"),
+        }
+    }
+}
+
 /// PX4 main modes.
 pub mod px4 {
     /// MANUAL.

@@ -101,10 +101,23 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
         pp(&o.update_ms),
         pp(&o.guidance_ms)
     );
+    let final_mode = r
+        .final_mode
+        .map_or_else(|| "an unknown mode".to_string(), |m| m.to_string());
+    let failsafes = if r.unexpected_mode_changes.is_empty() {
+        "no mode change by the vehicle itself".to_string()
+    } else {
+        let changes: Vec<String> = r
+            .unexpected_mode_changes
+            .iter()
+            .map(|(a, b)| format!("{a} -> {b}"))
+            .collect();
+        format!("mode changes by the vehicle itself: {}", changes.join(", "))
+    };
     let _ = writeln!(
         t,
-        "vehicle: final mode {:?}; failsafe mode changes {:?}; link losses {}; setpoints refused by the geofence {}; filter periods without a camera frame {}",
-        r.final_mode, r.unexpected_mode_changes, r.link_losses, r.geofence_refusals, o.frames_missed
+        "vehicle: ended in {final_mode}; {failsafes}; link lost {} time(s); {} setpoint(s) refused by the geofence; {} filter period(s) without a camera frame",
+        r.link_losses, r.geofence_refusals, o.frames_missed
     );
     t
 }
