@@ -287,7 +287,10 @@ fn rust_log_is_honoured_and_piped_logs_are_plain_text() {
         err.contains("INFO") && err.contains("infotrack: tracking started"),
         "RUST_LOG=info ignored:\n{err}"
     );
-    assert!(!err.contains('\u{1b}'), "colour codes in a piped log:\n{err}");
+    assert!(
+        !err.contains('\u{1b}'),
+        "colour codes in a piped log:\n{err}"
+    );
     assert!(
         out.contains("vehicle: ended in HOLD") && !out.contains("Some("),
         "{out}"
@@ -301,7 +304,16 @@ fn rust_log_is_honoured_and_piped_logs_are_plain_text() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("RUST_LOG `not a [filter`"), "{err}");
     let o = infotrack()
-        .args(["sim", "--runs", "1", "--duration", "2", "--quiet", "--log", "error"])
+        .args([
+            "sim",
+            "--runs",
+            "1",
+            "--duration",
+            "2",
+            "--quiet",
+            "--log",
+            "error",
+        ])
         .env("RUST_LOG", "not a [filter")
         .output()
         .unwrap();

@@ -403,13 +403,57 @@ pub struct GuidanceConfig {
 pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
 
 impl Config {
-    /// Loads and validates a configuration file.
+    /// Loads and validates a configuration file. Relative paths in it (the calibration,
+    /// the model, the ONNX Runtime library, the signing key) are taken from the config
+    /// file's folder, so that `run --config /etc/infotrack/px4.toml` works from anywhere;
+    /// a path found only from the current directory (how configs were read before) still
+    /// works, with a warning.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
             path: path.to_path_buf(),
             source,
         })?;
-        Self::from_toml_str(&text, path)
+        let mut cfg = Self::from_toml_str(&text, path)?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        cfg.resolve_paths(base, path);
+        Ok(cfg)
+    }
+
+    /// Makes the relative file paths of the config relative to `base` (its folder).
+    fn resolve_paths(&mut self, base: &Path, origin: &Path) {
+        let resolve = |key: &str, p: &mut PathBuf| {
+            if p.is_absolute() {
+                return;
+            }
+            let beside = base.join(&*p);
+            if beside.exists() {
+                *p = beside;
+            } else if p.exists() {
+                tracing::warn!(
+                    "{}: {key} = {} is found from the current directory, not from the config's folder {}; write it relative to the config file",
+                    origin.display(),
+                    p.display(),
+                    base.display()
+                );
+            } else {
+                // Missing either way: name the config-relative place in later errors.
+                *p = beside;
+            }
+        };
+        if let Some(c) = self.daemon.calibration.as_mut() {
+            resolve("daemon.calibration", c);
+        }
+        if let Some(k) = self.daemon.signing_key.as_mut() {
+            resolve("daemon.signing_key", k);
+        }
+        // The default (the lab model) is not the config's to place: it stays where the
+        // program finds it.
+        if self.motion.dmmn_model != default_dmmn_model() {
+            resolve("motion.dmmn_model", &mut self.motion.dmmn_model);
+        }
+        if let Some(l) = self.motion.onnxruntime_library.as_mut() {
+            resolve("motion.onnxruntime_library", l);
+        }
     }
 
     /// Parses and validates TOML text; `origin` names the source in error messages.

@@ -245,3 +245,31 @@ fn sizes_and_rates_that_would_exhaust_the_companion_are_refused_naming_the_key()
         Config::load(&p).unwrap_or_else(|e| panic!("{shipped}: {e}"));
     }
 }
+
+/// Paths in a config are taken from the config file's folder, whatever the current
+/// directory (`run --config /etc/infotrack/config/px4.toml` under systemd); the default
+/// model is left where the program finds it.
+#[test]
+fn relative_paths_resolve_from_the_config_file() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let px4 = Config::load(&root.join("config/px4.toml")).unwrap();
+    let cal = px4.daemon.calibration.unwrap();
+    assert!(cal.is_file(), "{}", cal.display());
+    assert!(cal.starts_with(root.join("config")), "{}", cal.display());
+    assert!(
+        px4.motion.dmmn_model.is_file(),
+        "{}",
+        px4.motion.dmmn_model.display()
+    );
+    // A copy elsewhere with its own calibration beside it.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(root.join("config/px4.toml"), dir.path().join("px4.toml")).unwrap();
+    std::fs::write(dir.path().join("camera-example.yaml"), "x").unwrap();
+    let copy = Config::load(&dir.path().join("px4.toml")).unwrap();
+    assert_eq!(
+        copy.daemon.calibration.unwrap(),
+        dir.path().join("camera-example.yaml")
+    );
+    let ring = Config::load(&root.join("config/field-ring.toml")).unwrap();
+    assert_eq!(ring.motion.dmmn_model, Path::new("models/dmmn.onnx"));
+}
