@@ -161,13 +161,15 @@ impl FlightRecorder {
         if self.failed.is_some() {
             return;
         }
+        // The rename makes the replacement atomic for a killed process; no fsync here (it
+        // would stall the pipeline thread every few seconds): the files are fsync'd at
+        // changes of phase and at the end.
         let tmp = self.dir.join(".summary.json.tmp");
         let result = serde_json::to_vec_pretty(summary)
             .map_err(std::io::Error::other)
             .and_then(|bytes| {
                 let mut f = File::create(&tmp)?;
-                f.write_all(&bytes)?;
-                f.sync_data()
+                f.write_all(&bytes)
             })
             .and_then(|()| std::fs::rename(&tmp, self.dir.join("summary.json")));
         if let Err(e) = result {
