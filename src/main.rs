@@ -410,26 +410,21 @@ fn bench(a: BenchArgs) -> Result<()> {
     }
     if a.vision_altitude {
         let rows = cli::altitude_bench::run(a.repetitions, a.seed)?;
-        print!("{}", cli::altitude_bench::render_table(&rows));
-        if let Some(p) = &a.json {
-            report::write_json(p, &rows)?;
-            println!("wrote {}", p.display());
-        }
-        return Ok(());
+        return print_bench(&cli::altitude_bench::render_table(&rows), &rows, &a.json);
     }
     if a.vision {
         let rows = cli::detect_bench::run(a.repetitions, a.seed)?;
-        print!("{}", cli::detect_bench::render_table(&rows));
-        if let Some(p) = &a.json {
-            report::write_json(p, &rows)?;
-            println!("wrote {}", p.display());
-        }
-        return Ok(());
+        return print_bench(&cli::detect_bench::render_table(&rows), &rows, &a.json);
     }
     let r = cli::bench::run(a.repetitions, a.seed, &a.model);
-    print!("{}", cli::bench::render(&r));
-    if let Some(p) = &a.json {
-        report::write_json(p, &r)?;
+    print_bench(&cli::bench::render(&r), &r, &a.json)
+}
+
+/// Prints a benchmark's table and writes its figures as JSON when asked.
+fn print_bench(table: &str, figures: &impl serde::Serialize, json: &Option<PathBuf>) -> Result<()> {
+    print!("{table}");
+    if let Some(p) = json {
+        report::write_json(p, figures)?;
         println!("wrote {}", p.display());
     }
     Ok(())

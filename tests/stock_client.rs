@@ -108,6 +108,27 @@ impl Client {
         panic!("no COMMAND_ACK for {command:?}");
     }
 
+    async fn arm(&self) -> MavResult {
+        self.command(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await
+    }
+
+    /// MAV_CMD_NAV_LAND, then waits for the disarm on the ground.
+    async fn land_and_disarm(&self) {
+        assert_eq!(
+            self.command(MavCmd::MAV_CMD_NAV_LAND, [0.0; 7]).await,
+            MavResult::MAV_RESULT_ACCEPTED
+        );
+        assert!(
+            eventually(20.0, || !self.armed() && self.on_ground()).await,
+            "not disarmed on the ground; altitude {}",
+            self.altitude_m()
+        );
+    }
+
     fn armed(&self) -> bool {
         matches!(self.get("HEARTBEAT"), Some(MavMessage::HEARTBEAT(h))
             if h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED))
@@ -206,14 +227,7 @@ async fn mavproxy_style_client_flies_the_ardupilot_mock() {
         c.set_mode(Flavor::ArduPilot, Mode::Guided).await,
         MavResult::MAV_RESULT_ACCEPTED
     );
-    assert_eq!(
-        c.command(
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
-        )
-        .await,
-        MavResult::MAV_RESULT_ACCEPTED
-    );
+    assert_eq!(c.arm().await, MavResult::MAV_RESULT_ACCEPTED);
     assert_eq!(
         c.command(
             MavCmd::MAV_CMD_NAV_TAKEOFF,
@@ -231,15 +245,7 @@ async fn mavproxy_style_client_flies_the_ardupilot_mock() {
         }
     }
     assert!((c.north_m() - 4.0).abs() < 0.3, "north {}", c.north_m());
-    assert_eq!(
-        c.command(MavCmd::MAV_CMD_NAV_LAND, [0.0; 7]).await,
-        MavResult::MAV_RESULT_ACCEPTED
-    );
-    assert!(
-        eventually(20.0, || !c.armed() && c.on_ground()).await,
-        "not disarmed on the ground; altitude {}",
-        c.altitude_m()
-    );
+    c.land_and_disarm().await;
 }
 
 /// As MAVSDK flies PX4: AUTOPILOT_VERSION and HOME_POSITION by MAV_CMD_REQUEST_MESSAGE,
@@ -269,14 +275,7 @@ async fn mavsdk_style_client_flies_the_px4_mock() {
         eventually(3.0, || c.healthy()).await,
         "SYS_STATUS never healthy"
     );
-    assert_eq!(
-        c.command(
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
-        )
-        .await,
-        MavResult::MAV_RESULT_ACCEPTED
-    );
+    assert_eq!(c.arm().await, MavResult::MAV_RESULT_ACCEPTED);
     assert_eq!(
         c.command(
             MavCmd::MAV_CMD_NAV_TAKEOFF,
@@ -307,13 +306,5 @@ async fn mavsdk_style_client_flies_the_px4_mock() {
         }
     }
     assert!((c.north_m() - 4.0).abs() < 0.3, "north {}", c.north_m());
-    assert_eq!(
-        c.command(MavCmd::MAV_CMD_NAV_LAND, [0.0; 7]).await,
-        MavResult::MAV_RESULT_ACCEPTED
-    );
-    assert!(
-        eventually(20.0, || !c.armed() && c.on_ground()).await,
-        "not disarmed on the ground; altitude {}",
-        c.altitude_m()
-    );
+    c.land_and_disarm().await;
 }

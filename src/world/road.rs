@@ -187,12 +187,7 @@ impl RoadNetwork {
             return out;
         };
         self.walk(u, v, s0, 0.0, 1.0, distance_m, 0, &mut out);
-        out.total = out
-            .pieces
-            .iter()
-            .zip(&out.weights)
-            .map(|((a, b), w)| (b - a).norm() * w)
-            .sum();
+        out.sum_total();
         out
     }
 
@@ -236,12 +231,7 @@ impl RoadNetwork {
                 );
             }
         }
-        out.total = out
-            .pieces
-            .iter()
-            .zip(&out.weights)
-            .map(|((a, b), w)| (b - a).norm() * w)
-            .sum();
+        out.sum_total();
         out
     }
 
@@ -347,6 +337,16 @@ pub struct RoadPieces {
 }
 
 impl RoadPieces {
+    /// Sets the total weighted length from the pieces (after they are collected).
+    fn sum_total(&mut self) {
+        self.total = self
+            .pieces
+            .iter()
+            .zip(&self.weights)
+            .map(|((a, b), w)| (b - a).norm() * w)
+            .sum();
+    }
+
     /// Total weighted length, m (the plain length when every weight is 1).
     pub fn length_m(&self) -> f64 {
         self.total
