@@ -586,6 +586,9 @@ fn params(a: ParamsArgs) -> Result<()> {
             params_sync::check(&l, &file).await
         };
         print!("{}", params_sync::render(&rows));
+        if let (false, Some(why)) = (params_sync::all_ok(&rows), l.signing_diagnosis()) {
+            bail!("{file_name}: {why}");
+        }
         let untouched = rows
             .iter()
             .any(|r| r.status == params_sync::ParamStatus::NotWritten);

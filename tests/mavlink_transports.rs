@@ -267,6 +267,11 @@ async fn signing_unsigned_and_wrongly_signed_commands_are_refused() {
         let err = link.set_mode(Mode::Guided).await.unwrap_err().to_string();
         assert!(err.contains("no COMMAND_ACK"), "{err}");
         assert!(
+            err.contains("signing mismatch: the vehicle signs its messages")
+                && err.contains("no daemon.signing_key"),
+            "the error names the cause: {err}"
+        );
+        assert!(
             mock.rejected_unsigned() >= 3,
             "{}",
             mock.rejected_unsigned()
@@ -284,6 +289,10 @@ async fn signing_unsigned_and_wrongly_signed_commands_are_refused() {
             .unwrap_err()
             .to_string();
         assert!(err.contains("no autopilot heartbeat"), "{err}");
+        assert!(
+            err.contains("signed with a different key than daemon.signing_key"),
+            "the error names the cause: {err}"
+        );
         assert_eq!(mock.with(|m| m.mode()), Mode::Stabilized);
     }
     // The right key: commands go through.
@@ -294,6 +303,31 @@ async fn signing_unsigned_and_wrongly_signed_commands_are_refused() {
     link.set_mode(Mode::Guided).await.unwrap();
     link.arm().await.unwrap();
     assert!(mock.with(|m| m.armed()));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_signing_link_names_a_vehicle_that_does_not_sign() {
+    let port = free_udp_port();
+    let _mock = spawn(
+        &format!("udpin:127.0.0.1:{port}"),
+        MockConfig::new(Flavor::Px4),
+        Faults::default(),
+    )
+    .await
+    .unwrap();
+    let mut cfg = link_cfg(&format!("udpout:127.0.0.1:{port}"), 1);
+    cfg.signing_key = Some(key(7));
+    let link = VehicleLink::connect(cfg).await.unwrap();
+    let err = link
+        .wait_vehicle(Duration::from_millis(1500))
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("no autopilot heartbeat")
+            && err.contains("unsigned frame(s) were refused because daemon.signing_key is set"),
+        "{err}"
+    );
 }
 
 async fn mock_with(flavor: Flavor, faults: Faults) -> (MockHandle, VehicleLink) {

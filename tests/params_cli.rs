@@ -178,6 +178,11 @@ fn a_signed_vehicle_answers_only_a_signed_companion() {
         !unsigned.status.success(),
         "an unsigned companion was answered"
     );
+    let err = String::from_utf8_lossy(&unsigned.stderr);
+    assert!(
+        err.contains("signing mismatch: the vehicle signs its messages"),
+        "the cause is named: {err}"
+    );
     let signed = run(true);
     assert!(
         signed.status.success(),

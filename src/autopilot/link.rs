@@ -38,20 +38,24 @@ pub enum LinkError {
         message: String,
     },
     /// No HEARTBEAT from an autopilot in time.
-    #[error("no autopilot heartbeat on `{url}` within {seconds} s")]
+    #[error("no autopilot heartbeat on `{url}` within {seconds} s{hint}")]
     NoVehicle {
         /// The URL.
         url: String,
         /// How long we waited.
         seconds: f64,
+        /// What the link saw that explains it (a signing mismatch), as `; ...`, or empty.
+        hint: String,
     },
     /// A command was never acknowledged.
-    #[error("{command:?}: no COMMAND_ACK after {attempts} attempts")]
+    #[error("{command:?}: no COMMAND_ACK after {attempts} attempts{hint}")]
     NoAck {
         /// The command.
         command: MavCmd,
         /// Attempts made.
         attempts: u32,
+        /// What the link saw that explains it (a signing mismatch), as `; ...`, or empty.
+        hint: String,
     },
     /// The vehicle refused a command.
     #[error("{command:?} refused by the vehicle: {result:?}")]
@@ -572,6 +576,19 @@ impl VehicleLink {
         self.events.subscribe()
     }
 
+    /// A signing mismatch seen on this link, in a sentence, if any (see
+    /// [`Connection::signing_diagnosis`]).
+    pub fn signing_diagnosis(&self) -> Option<String> {
+        self.conn.signing_diagnosis()
+    }
+
+    /// Why the vehicle may be silent toward us, as `; <sentence>`, or empty.
+    fn silence_hint(&self) -> String {
+        self.signing_diagnosis()
+            .map(|d| format!("; {d}"))
+            .unwrap_or_default()
+    }
+
     /// Waits for an autopilot's heartbeat; returns its flavour.
     pub async fn wait_vehicle(&self, timeout: Duration) -> Result<Flavor, LinkError> {
         let until = Instant::now() + timeout;
@@ -583,6 +600,7 @@ impl VehicleLink {
                 return Err(LinkError::NoVehicle {
                     url: self.cfg.url.clone(),
                     seconds: timeout.as_secs_f64(),
+                    hint: self.silence_hint(),
                 });
             }
             // udpout/tcpout peers learn our address from what we send.
@@ -680,6 +698,7 @@ impl VehicleLink {
         Err(LinkError::NoAck {
             command,
             attempts: self.cfg.attempts,
+            hint: self.silence_hint(),
         })
     }
 
@@ -953,6 +972,14 @@ impl VehicleLink {
                 return Ok((v, t));
             }
         }
+        let hint = self.silence_hint();
+        if !hint.is_empty() {
+            // Not a missing parameter: the vehicle refuses to hear us.
+            return Err(LinkError::Timeout {
+                what: format!("the vehicle to answer for parameter {name}{hint}"),
+                seconds: self.cfg.ack_timeout.as_secs_f64() * self.cfg.attempts as f64,
+            });
+        }
         Err(LinkError::NoSuchParam(name.to_string()))
     }
 
@@ -977,7 +1004,10 @@ impl VehicleLink {
             }
         }
         Err(LinkError::Timeout {
-            what: format!("the vehicle to confirm {name} = {value}"),
+            what: format!(
+                "the vehicle to confirm {name} = {value}{}",
+                self.silence_hint()
+            ),
             seconds: self.cfg.ack_timeout.as_secs_f64() * self.cfg.attempts as f64,
         })
     }

@@ -29,6 +29,8 @@ pub enum ParamStatus {
     Mismatch,
     /// The vehicle has no such parameter.
     Missing,
+    /// The vehicle did not answer for it (the link says why, e.g. a signing mismatch).
+    NoAnswer,
     /// Written and confirmed.
     Applied,
     /// Writing failed.
@@ -53,7 +55,8 @@ pub async fn check(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
         let (vehicle_value, status) = match link.param_read(&p.name).await {
             Ok((v, _)) if same(v, p.value) => (Some(v), ParamStatus::Match),
             Ok((v, _)) => (Some(v), ParamStatus::Mismatch),
-            Err(_) => (None, ParamStatus::Missing),
+            Err(LinkError::NoSuchParam(_)) => (None, ParamStatus::Missing),
+            Err(_) => (None, ParamStatus::NoAnswer),
         };
         rows.push(ParamRow {
             name: p.name.clone(),
@@ -73,7 +76,8 @@ pub async fn apply(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
     let mut found = Vec::new();
     for p in params {
         found.push(match link.param_read(&p.name).await {
-            Err(_) => Err(ParamStatus::Missing),
+            Err(LinkError::NoSuchParam(_)) => Err(ParamStatus::Missing),
+            Err(_) => Err(ParamStatus::NoAnswer),
             Ok((_, ty)) if !ty.accepts(p.value) => Err(ParamStatus::DoesNotFit),
             Ok((v, ty)) => Ok((v, ty)),
         });
@@ -133,6 +137,7 @@ pub fn render(rows: &[ParamRow]) -> String {
             ParamStatus::Match => "match",
             ParamStatus::Mismatch => "MISMATCH",
             ParamStatus::Missing => "NOT ON VEHICLE",
+            ParamStatus::NoAnswer => "NO ANSWER",
             ParamStatus::Applied => "applied",
             ParamStatus::Failed => "FAILED",
             ParamStatus::DoesNotFit => "DOES NOT FIT ITS TYPE",

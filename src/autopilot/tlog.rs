@@ -7,6 +7,7 @@
 
 use std::io::Write;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -16,6 +17,10 @@ use mavlink::{MavHeader, MavlinkVersion};
 /// An open telemetry log.
 pub struct Tlog {
     out: Mutex<std::io::BufWriter<std::fs::File>>,
+    /// The file, for the one error said when a write fails.
+    path: String,
+    /// A write failed (a full disk): said once, then the log is best effort.
+    failed: AtomicBool,
     /// Wall-clock time at creation, µs since the Unix epoch.
     opened_unix_us: u64,
     /// The runtime's clock at creation: stamps advance with it, so a flight on the simulated
@@ -28,6 +33,8 @@ impl Tlog {
     pub fn create(path: &Path) -> std::io::Result<Self> {
         Ok(Self {
             out: Mutex::new(std::io::BufWriter::new(std::fs::File::create(path)?)),
+            path: path.display().to_string(),
+            failed: AtomicBool::new(false),
             opened_unix_us: SystemTime::now()
                 .duration_since(UNIX_EPOCH)
                 .map(|d| d.as_micros() as u64)
@@ -44,9 +51,19 @@ impl Tlog {
         }
         let us = self.opened_unix_us + self.opened.elapsed().as_micros() as u64;
         let mut out = self.out.lock().expect("tlog poisoned");
-        // A full disk must not stop the flight; the log is best effort and flushed at the end.
-        let _ = out.write_all(&us.to_be_bytes());
-        let _ = out.write_all(&frame);
+        // A full disk must not stop the flight: said once, and the log goes on trying (the
+        // buffer reaches the disk every ~8 KB, within a second at telemetry rates).
+        let written = out
+            .write_all(&us.to_be_bytes())
+            .and_then(|()| out.write_all(&frame));
+        if let Err(e) = written {
+            if !self.failed.swap(true, Ordering::Relaxed) {
+                tracing::error!(
+                    "{}: {e}; the tlog misses messages from here (disk full?), the flight goes on",
+                    self.path
+                );
+            }
+        }
     }
 
     /// Flushes to disk.
@@ -55,7 +72,9 @@ impl Tlog {
     }
 }
 
-/// Reads a tlog back: (timestamp us, header, message) for every frame.
+/// Reads a tlog back: (timestamp us, header, message) for every frame. A last frame cut
+/// short (a kill or a full disk mid-write) ends the log; anything else that is not a frame
+/// is an error naming its byte.
 pub fn read(path: &Path) -> std::io::Result<Vec<(u64, MavHeader, MavMessage)>> {
     let bytes = std::fs::read(path)?;
     let bad = |at: usize, what: String| {
@@ -69,15 +88,26 @@ pub fn read(path: &Path) -> std::io::Result<Vec<(u64, MavHeader, MavMessage)>> {
     while at < bytes.len() {
         // Timestamp, then a MAVLink 2 frame: STX, len, incompat flags, ... payload, CRC,
         // and a 13-byte signature when flagged.
-        if bytes.len() < at + 8 + 10 || bytes[at + 8] != 0xfd {
+        if bytes.len() < at + 8 + 10 {
+            tracing::warn!(
+                "{}: the last frame is cut short at byte {at}",
+                path.display()
+            );
+            break;
+        }
+        if bytes[at + 8] != 0xfd {
             return Err(bad(at, "not a timestamped MAVLink 2 frame".into()));
         }
         let ts = u64::from_be_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
         let f = at + 8;
         let len = 10 + bytes[f + 1] as usize + 2 + if bytes[f + 2] & 1 != 0 { 13 } else { 0 };
-        let frame = bytes
-            .get(f..f + len)
-            .ok_or_else(|| bad(at, "truncated frame".into()))?;
+        let Some(frame) = bytes.get(f..f + len) else {
+            tracing::warn!(
+                "{}: the last frame is cut short at byte {at}",
+                path.display()
+            );
+            break;
+        };
         let mut reader = mavlink::MavlinkReader::new(frame);
         let (h, m) = reader
             .read_message::<MavMessage>(MavlinkVersion::V2)
@@ -123,5 +153,23 @@ mod tests {
         assert_eq!(back[0].1.sequence, 42);
         assert_eq!(back[1].2, pos);
         assert!(back[0].0 > 1_600_000_000_000_000, "a Unix time in us");
+
+        // Cut anywhere inside the last record, the log reads up to the record before it;
+        // garbage where a record should start is an error naming its byte.
+        let bytes = std::fs::read(&p).unwrap();
+        let first = 8 + mavlink_frame_len(&bytes[8..]);
+        for cut in first..bytes.len() {
+            std::fs::write(&p, &bytes[..cut]).unwrap();
+            assert_eq!(read(&p).unwrap().len(), 1, "cut at {cut}");
+        }
+        let mut bad = bytes.clone();
+        bad[first + 8] = 0x00;
+        std::fs::write(&p, &bad).unwrap();
+        let e = read(&p).unwrap_err().to_string();
+        assert!(e.contains(&format!("byte {first}")), "{e}");
+    }
+
+    fn mavlink_frame_len(f: &[u8]) -> usize {
+        12 + f[1] as usize + if f[2] & 1 != 0 { 13 } else { 0 }
     }
 }

@@ -221,20 +221,31 @@ pub fn fly(
                 dir.display()
             );
         }
+        // The flight is over and the vehicle holds: a write failing here (a full disk) is
+        // said, and the files that made it stay.
         let world = cfg.world();
-        report::plots::scene(
-            &dir.join("scene.png"),
-            &format!("{} | closed loop, {} guidance", cfg.name, "eer"),
-            &world,
-            &steps,
-            &[],
-        )?;
-        report::plots::estimation_error(
-            &dir.join("estimation_error.png"),
-            "closed loop: estimation error",
-            &steps,
-        )?;
-        report::write_json(&dir.join("summary.json"), &report.summary)?;
+        let written = [
+            report::plots::scene(
+                &dir.join("scene.png"),
+                &format!("{} | closed loop, {} guidance", cfg.name, "eer"),
+                &world,
+                &steps,
+                &[],
+            ),
+            report::plots::estimation_error(
+                &dir.join("estimation_error.png"),
+                "closed loop: estimation error",
+                &steps,
+            ),
+            report::write_json(&dir.join("summary.json"), &report.summary),
+        ];
+        let failed: Vec<_> = written.into_iter().filter_map(Result::err).collect();
+        for e in &failed {
+            eprintln!("warning: after the flight: {e:#}");
+        }
+        if !failed.is_empty() {
+            return Ok(());
+        }
         println!(
             "wrote steps.csv, flight.csv, link.tlog, scene.png, estimation_error.png and summary.json to {}",
             dir.display()

@@ -1,6 +1,6 @@
 //! What the ground station is told about the tracker: a STATUSTEXT at each event (tracking
 //! started, target acquired, lost, found again, the lost-target fallback, camera lost and
-//! back, the stop and hold) and, once a second, NAMED_VALUE_FLOATs with the tracker's state
+//! back, flight records that stopped on a full disk, the stop and hold) and, once a second, NAMED_VALUE_FLOATs with the tracker's state
 //! (`IT_SEEN` 0/1, `IT_NEFF` effective sample size, `IT_H` entropy, `IT_RAD_M` the
 //! estimate's one-sigma radius in metres). Every ground station shows STATUSTEXT in its
 //! messages panel; QGroundControl plots NAMED_VALUE_FLOATs in its MAVLink Inspector and
@@ -24,6 +24,7 @@ pub struct GcsReporter {
     fallback: String,
     last_state: Option<TrackState>,
     ever_seen: bool,
+    records_failure_said: bool,
     last_values: Option<Instant>,
 }
 
@@ -35,6 +36,7 @@ impl GcsReporter {
             fallback: fallback.to_string(),
             last_state: None,
             ever_seen: false,
+            records_failure_said: false,
             last_values: None,
         }
     }
@@ -59,6 +61,13 @@ impl GcsReporter {
     pub fn events(&mut self, s: &Status) -> Vec<(MavSeverity, String)> {
         use MavSeverity::*;
         let mut out = Vec::new();
+        if s.records_failed && !self.records_failure_said {
+            self.records_failure_said = true;
+            out.push((
+                MAV_SEVERITY_CRITICAL,
+                "infotrack: log write failed (disk full?)".to_string(),
+            ));
+        }
         if s.seen && !self.ever_seen {
             self.ever_seen = true;
             out.push((
@@ -126,6 +135,7 @@ mod tests {
             entropy: 3.5,
             state,
             radius_m: 2.0,
+            records_failed: false,
         }
     }
 
@@ -155,6 +165,12 @@ mod tests {
             texts(r.events(&status(false, TrackState::Tracking))),
             ["infotrack: camera back, tracking"]
         );
+        let mut full = status(false, TrackState::Tracking);
+        full.records_failed = true;
+        let said = r.events(&full);
+        assert_eq!(said[0].0, MavSeverity::MAV_SEVERITY_CRITICAL);
+        assert_eq!(texts(said), ["infotrack: log write failed (disk full?)"]);
+        assert!(r.events(&full).is_empty(), "said once");
         for (_, t) in [GcsReporter::started("dmmn"), GcsReporter::stopped("signal")] {
             assert!(t.len() <= 50, "{t}");
         }

@@ -52,6 +52,9 @@ pub struct Status {
     pub state: TrackState,
     /// The estimate's uncertainty: one standard deviation along its widest axis, m.
     pub radius_m: f64,
+    /// Whether the flight records stopped being written (a full disk; the reason is in the
+    /// log).
+    pub records_failed: bool,
 }
 
 /// What the supervisor tells the pipeline, rewritten every 20 ms.
@@ -528,6 +531,10 @@ impl Pipeline {
                 .max()
                 .max(0.0)
                 .sqrt(),
+            records_failed: self
+                .recorder
+                .as_ref()
+                .is_some_and(|r| r.failure().is_some()),
         });
         self.out.records.push(FlightRecord {
             pose: self
