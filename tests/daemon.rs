@@ -645,11 +645,15 @@ fn field_configs_load_and_name_their_camera_when_it_is_missing() {
     ] {
         let cfg = Config::load(&root.join(file)).unwrap();
         assert_eq!(cfg.daemon.vehicle, url);
+        // The pilot takes off and hands over in the field; the simulated lab flies itself.
+        assert_eq!(cfg.daemon.engage, infotrack::config::Engage::Pilot);
         assert_eq!(cfg.daemon.camera, "v4l2:0");
         let calib = root.join(cfg.daemon.calibration.as_ref().unwrap());
         let intr = infotrack::vision::cv_io::load_calibration(&calib).unwrap();
         assert_eq!((intr.width_px, intr.height_px), (1280, 720));
     }
+    let lab = Config::load(&root.join("config/default.toml")).unwrap();
+    assert_eq!(lab.daemon.engage, infotrack::config::Engage::Auto);
     if std::path::Path::new("/dev/video0").exists() {
         eprintln!("a camera is attached: the missing-camera check does not apply here");
         return;

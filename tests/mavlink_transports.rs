@@ -283,8 +283,9 @@ async fn signing_unsigned_and_wrongly_signed_commands_are_refused() {
         let mut cfg = link_cfg(&url, 1);
         cfg.signing_key = Some(key(8));
         let link = VehicleLink::connect(cfg).await.unwrap();
+        // Long enough for the vehicle's 1 Hz heartbeat to reach this new link twice.
         let err = link
-            .wait_vehicle(Duration::from_millis(800))
+            .wait_vehicle(Duration::from_millis(2500))
             .await
             .unwrap_err()
             .to_string();

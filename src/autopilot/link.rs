@@ -616,7 +616,8 @@ impl VehicleLink {
         }
     }
 
-    fn flavor(&self) -> Flavor {
+    /// The vehicle's firmware (PX4 until a heartbeat has said otherwise).
+    pub fn flavor(&self) -> Flavor {
         self.state().flavor.unwrap_or(Flavor::Px4)
     }
 

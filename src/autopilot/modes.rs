@@ -157,6 +157,15 @@ impl Mode {
         }
     }
 
+    /// The mode in which the vehicle follows a companion's setpoints: PX4 OFFBOARD,
+    /// ArduPilot GUIDED.
+    pub fn companion_for(flavor: Flavor) -> Mode {
+        match flavor {
+            Flavor::Px4 => Mode::Offboard,
+            Flavor::ArduPilot => Mode::Guided,
+        }
+    }
+
     /// HEARTBEAT.custom_mode for this mode on `flavor`; `None` if the firmware has no such mode.
     pub fn custom_mode(&self, flavor: Flavor) -> Option<u32> {
         use Mode::*;

@@ -105,14 +105,17 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
         .final_mode
         .map_or_else(|| "an unknown mode".to_string(), |m| m.to_string());
     let failsafes = if r.unexpected_mode_changes.is_empty() {
-        "no mode change by the vehicle itself".to_string()
+        "no mode change that infotrack did not command".to_string()
     } else {
         let changes: Vec<String> = r
             .unexpected_mode_changes
             .iter()
             .map(|(a, b)| format!("{a} -> {b}"))
             .collect();
-        format!("mode changes by the vehicle itself: {}", changes.join(", "))
+        format!(
+            "mode changes infotrack did not command (a failsafe, the pilot or a GCS): {}",
+            changes.join(", ")
+        )
     };
     let _ = writeln!(
         t,

@@ -159,6 +159,22 @@ pub struct DaemonConfig {
     pub camera_timeout_s: f64,
     /// MAVLink 2 signing key file (64 hex digits); none: unsigned.
     pub signing_key: Option<PathBuf>,
+    /// Who starts the flight: `auto` (infotrack arms, takes off and flies to the start
+    /// point: the simulated default) or `pilot` (the pilot takes off and hands over by
+    /// switching to OFFBOARD/GUIDED; infotrack never arms and lets go when the mode leaves).
+    pub engage: Engage,
+}
+
+/// Who starts and hands over the flight (`daemon.engage`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engage {
+    /// infotrack arms, takes off, flies to the start point and tracks.
+    #[default]
+    Auto,
+    /// The pilot takes off with the RC; infotrack commands only while the pilot (or the
+    /// GCS) has the vehicle in OFFBOARD (PX4) or GUIDED (ArduPilot).
+    Pilot,
 }
 
 impl Default for DaemonConfig {
@@ -184,6 +200,7 @@ impl Default for DaemonConfig {
             guidance_budget_ms: 300.0,
             camera_timeout_s: 1.0,
             signing_key: None,
+            engage: Engage::Auto,
         }
     }
 }

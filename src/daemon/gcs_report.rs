@@ -57,6 +57,14 @@ impl GcsReporter {
         )
     }
 
+    /// The message when the daemon stops while the pilot has the vehicle (nothing changed).
+    pub fn stopped_released(why: &str) -> (MavSeverity, String) {
+        (
+            MavSeverity::MAV_SEVERITY_NOTICE,
+            format!("infotrack: stopped ({why}); pilot has it"),
+        )
+    }
+
     /// The events since the last status, as STATUSTEXTs to send.
     pub fn events(&mut self, s: &Status) -> Vec<(MavSeverity, String)> {
         use MavSeverity::*;
@@ -171,7 +179,11 @@ mod tests {
         assert_eq!(said[0].0, MavSeverity::MAV_SEVERITY_CRITICAL);
         assert_eq!(texts(said), ["infotrack: log write failed (disk full?)"]);
         assert!(r.events(&full).is_empty(), "said once");
-        for (_, t) in [GcsReporter::started("dmmn"), GcsReporter::stopped("signal")] {
+        for (_, t) in [
+            GcsReporter::started("dmmn"),
+            GcsReporter::stopped("signal"),
+            GcsReporter::stopped_released("duration"),
+        ] {
             assert!(t.len() <= 50, "{t}");
         }
     }

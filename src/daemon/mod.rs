@@ -17,6 +17,7 @@
 //! stepped by that clock (one blocking task per tick): on a runtime whose time is paused
 //! ([`run_simulated`]) the whole daemon flies faster than real time through the same code.
 
+pub mod engagement;
 pub mod flight_log;
 pub mod gcs_report;
 pub mod pipeline;
@@ -35,7 +36,7 @@ use thiserror::Error;
 use crate::autopilot::link::{LinkConfig, LinkError, VehicleLink};
 use crate::autopilot::modes::{Flavor, Mode};
 use crate::autopilot::signing::SigningKey;
-use crate::config::Config;
+use crate::config::{Config, Engage};
 use crate::frames::Enu2;
 use crate::frames::PositionEnu;
 use crate::metrics::RunSummary;
@@ -88,6 +89,12 @@ pub enum DaemonError {
         /// `daemon.camera`.
         camera: String,
     },
+    /// `daemon.engage = "pilot"` with a vehicle that has no pilot.
+    #[error(
+        "daemon.engage = \"pilot\" needs a vehicle with a pilot; the in-process mock \
+         ({0}) has none: use daemon.engage = \"auto\" or a real vehicle (or a mock-autopilot a test drives)"
+    )]
+    PilotNeedsVehicle(String),
     /// The simulated-clock runtime could not be built.
     #[error("cannot build the simulated-clock runtime: {0}")]
     Runtime(std::io::Error),
@@ -324,22 +331,30 @@ async fn drive_pipeline(
 pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, DaemonError> {
     // The pipeline first: a missing model or a bad detector setting is an error before
     // anything flies.
+    if cfg.daemon.engage == Engage::Pilot && cfg.daemon.vehicle.starts_with("mock:") {
+        return Err(DaemonError::PilotNeedsVehicle(cfg.daemon.vehicle.clone()));
+    }
     let (pipeline, channels) = start_pipeline(cfg, opts).await?;
     let mut signal = shutdown_signal();
     let vehicle = connect(cfg, opts, &mut signal).await?;
+    let pilot = cfg.daemon.engage == Engage::Pilot;
     let launched: Result<(), DaemonError> = tokio::select! {
         r = launch(cfg, &vehicle.link) => r.map_err(DaemonError::from),
-        _ = &mut signal => Err(DaemonError::Interrupted(
-            "during takeoff, before tracking began; the vehicle was put in hold",
-        )),
+        _ = &mut signal => Err(DaemonError::Interrupted(if pilot {
+            "while waiting for the pilot's takeoff; nothing was commanded"
+        } else {
+            "during takeoff, before tracking began; the vehicle was put in hold"
+        })),
     };
     if let Err(e) = launched {
-        // A takeoff that failed or was stopped half-way may have left the vehicle armed and
-        // climbing.
         pipeline.shared.stop.store(true, Ordering::Relaxed);
         drop(channels);
-        if let Err(h) = vehicle.link.hold().await {
-            tracing::error!("could not put the vehicle in hold: {h}");
+        // A takeoff that failed or was stopped half-way may have left the vehicle armed and
+        // climbing; the pilot's takeoff is the pilot's.
+        if !pilot {
+            if let Err(h) = vehicle.link.hold().await {
+                tracing::error!("could not put the vehicle in hold: {h}");
+            }
         }
         vehicle.link.flush_tlog();
         return Err(e);
@@ -469,11 +484,52 @@ async fn connect(
     })
 }
 
-/// Phase 3: telemetry, takeoff to the tracking altitude, then the scenario's start point
-/// (`agent.start_enu_m`, where the simulator's agent starts) before tracking begins.
+/// Phase 3: telemetry, then the takeoff: infotrack's own (`auto`) or the pilot's.
 async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
-    let d = &cfg.daemon;
     link.request_telemetry().await?;
+    match cfg.daemon.engage {
+        Engage::Auto => take_off_to_start(cfg, link).await,
+        Engage::Pilot => wait_for_pilot_takeoff(link).await,
+    }
+}
+
+/// `daemon.engage = "pilot"`: waits, as long as it takes, until the pilot has the vehicle
+/// armed and off the ground. Nothing is commanded.
+async fn wait_for_pilot_takeoff(link: &VehicleLink) -> Result<(), LinkError> {
+    /// Above this height over the origin a vehicle that reports no landed state is airborne.
+    const AIRBORNE_M: f64 = 0.5;
+    tracing::warn!("daemon.engage = pilot: waiting for the pilot to take off");
+    let _ = link
+        .send_statustext(
+            mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_INFO,
+            "infotrack: ready; waiting for the pilot's takeoff",
+        )
+        .await;
+    loop {
+        let s = link.state();
+        let in_air = match s.landed {
+            Some((_, l)) => {
+                l == mavlink::dialects::ardupilotmega::MavLandedState::MAV_LANDED_STATE_IN_AIR
+            }
+            None => s
+                .local_ned
+                .is_some_and(|(_, p, _)| -p.z_down_m > AIRBORNE_M),
+        };
+        if s.armed && in_air {
+            tracing::warn!(
+                "the pilot has the vehicle in the air; infotrack takes over when the mode is switched to {}",
+                Mode::companion_for(link.flavor())
+            );
+            return Ok(());
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// `daemon.engage = "auto"`: takeoff to the tracking altitude, then the scenario's start
+/// point (`agent.start_enu_m`, where the simulator's agent starts) before tracking begins.
+async fn take_off_to_start(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
+    let d = &cfg.daemon;
     link.take_off(
         cfg.agent.altitude_m,
         Duration::from_secs_f64(d.takeoff_timeout_s),
@@ -531,6 +587,8 @@ async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
 /// What the tracking phase counted.
 struct Tracked {
     stopped_by: StopReason,
+    /// Whether infotrack had the vehicle at the end (then it holds it; else the pilot has it).
+    engaged: bool,
     link_losses: u32,
     geofence_refusals: u64,
     ticker: tokio::task::JoinHandle<()>,
@@ -549,6 +607,9 @@ struct Supervisor<'a> {
     fault_active: Vec<bool>,
     last_status: Instant,
     gcs: gcs_report::GcsReporter,
+    engagement: engagement::Engagement,
+    /// The setpoint stream is paused (link lost, or released on ArduPilot).
+    paused: bool,
 }
 
 /// Phase 4: steps the pipeline on the runtime's clock and, every 20 ms, feeds it the
@@ -585,6 +646,8 @@ async fn track(
         fault_active: vec![false; opts.faults.len()],
         last_status: Instant::now(),
         gcs: gcs_report::GcsReporter::new(&cfg.daemon.target_lost_fallback),
+        engagement: engagement::Engagement::new(cfg.daemon.engage, vehicle.flavor),
+        paused: false,
     };
     let (severity, text) = gcs_report::GcsReporter::started(&opts.motion);
     sup.tell_gcs(severity, &text).await;
@@ -603,12 +666,16 @@ async fn track(
         }
         sup.switch_faults(began.elapsed().as_secs_f64());
         let snap = sup.feed_vehicle_state();
+        sup.follow_pilot().await;
         sup.apply_command(snap);
         sup.print_status();
         sup.report_to_gcs().await;
     };
     Tracked {
         stopped_by,
+        engaged: sup.engagement.holds_at_stop()
+            && (cfg.daemon.engage == Engage::Auto
+                || vehicle.link.state().mode == Some(Mode::companion_for(vehicle.flavor))),
         link_losses: sup.link_losses,
         geofence_refusals: sup.geofence_refusals,
         ticker,
@@ -688,8 +755,6 @@ impl Supervisor<'_> {
         }
         let lost = link.state().lost;
         if lost != self.was_lost {
-            // Commands on stale state are worse than none: the vehicle's own failsafe acts.
-            link.pause_setpoints(lost);
             if lost {
                 self.link_losses += 1;
             }
@@ -698,10 +763,57 @@ impl Supervisor<'_> {
         snap
     }
 
+    /// Who has the vehicle (`engagement`): says when infotrack gains or loses it, and while
+    /// it does not have it streams what the firmware needs to let the pilot hand over (PX4:
+    /// the vehicle's own position) or nothing (ArduPilot).
+    async fn follow_pilot(&mut self) {
+        let link = &self.vehicle.link;
+        let mode = link.state().mode;
+        match self.engagement.update(mode) {
+            engagement::Change::Engaged => {
+                // Send the tracker's current command at once.
+                self.applied = None;
+                self.tell_gcs(
+                    mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_NOTICE,
+                    "infotrack: engaged by the pilot, tracking",
+                )
+                .await;
+            }
+            engagement::Change::Released { to } => {
+                let to = to.map_or("?".to_string(), |m| format!("{m:?}"));
+                self.tell_gcs(
+                    mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!("infotrack: released ({to}); pilot has it"),
+                )
+                .await;
+            }
+            engagement::Change::None => {}
+        }
+        let mut silent = false;
+        if !self.engagement.engaged() {
+            self.applied = None;
+            silent = match self.engagement.idle_stream() {
+                engagement::IdleStream::Silent => true,
+                // Outside the geofence nothing can be streamed; OFFBOARD then cannot be
+                // entered, which is what the fence is for.
+                engagement::IdleStream::HoldHere => match link.position_enu() {
+                    Some(here) => link.set_setpoint(here, 0.0).is_err(),
+                    None => true,
+                },
+            };
+        }
+        // Commands on stale state are worse than none: the vehicle's own failsafe acts.
+        let paused = self.was_lost || silent;
+        if paused != self.paused {
+            link.pause_setpoints(paused);
+            self.paused = paused;
+        }
+    }
+
     /// Sends the pipeline's newest command as a setpoint (inside the geofence).
     fn apply_command(&mut self, snap: Option<VehicleSnapshot>) {
         let cmd = self.shared.pipeline_view().command;
-        if cmd == self.applied || self.was_lost {
+        if cmd == self.applied || self.was_lost || !self.engagement.engaged() {
             return;
         }
         if let Some(c) = cmd {
@@ -792,16 +904,26 @@ async fn stop(
     let thread = pipeline.thread;
     let joined = tokio::task::spawn_blocking(move || thread.join()).await;
     // Clean stop, whatever happened to the pipeline: hold before exiting.
+    // Clean stop: hold if infotrack has the vehicle; never change the pilot's mode.
     let link = &vehicle.link;
-    if let Err(e) = link.hold().await {
-        tracing::error!("could not put the vehicle in hold: {e}");
+    let why = match tracked.stopped_by {
+        StopReason::Duration => "duration",
+        StopReason::Signal => "signal",
+        StopReason::Fault => "fault",
+    };
+    let said = if tracked.engaged {
+        match link.hold().await {
+            Ok(()) => Some(gcs_report::GcsReporter::stopped(why)),
+            Err(e) => {
+                tracing::error!("could not put the vehicle in hold: {e}");
+                None
+            }
+        }
     } else {
-        let why = match tracked.stopped_by {
-            StopReason::Duration => "duration",
-            StopReason::Signal => "signal",
-            StopReason::Fault => "fault",
-        };
-        let (severity, text) = gcs_report::GcsReporter::stopped(why);
+        link.pause_setpoints(true);
+        Some(gcs_report::GcsReporter::stopped_released(why))
+    };
+    if let Some((severity, text)) = said {
         if let Err(e) = link.send_statustext(severity, &text).await {
             tracing::debug!("STATUSTEXT `{text}`: {e}");
         }

@@ -121,6 +121,8 @@ pub struct MockAutopilot {
     events: Vec<MockEvent>,
     /// Message sequence for STATUSTEXT ids.
     text_id: u16,
+    /// SET_POSITION_TARGET_LOCAL_NED messages addressed to this vehicle, valid or not.
+    setpoints_received: u64,
 }
 
 fn header_ack(cmd: MavCmd, result: MavResult, to: &MavHeader) -> MavMessage {
@@ -188,6 +190,7 @@ impl MockAutopilot {
             home_ned_m: [0.0; 3],
             events: Vec::new(),
             text_id: 0,
+            setpoints_received: 0,
             cfg,
         }
     }
@@ -376,6 +379,7 @@ impl MockAutopilot {
             MavMessage::SET_POSITION_TARGET_LOCAL_NED(sp)
                 if self.addressed(sp.target_system, sp.target_component) =>
             {
+                self.setpoints_received += 1;
                 out.extend(self.setpoint(sp));
             }
             MavMessage::REQUEST_DATA_STREAM(r)
@@ -948,6 +952,7 @@ impl MockAutopilot {
     }
 }
 
+mod pilot;
 mod stock;
 
 #[cfg(test)]

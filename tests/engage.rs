@@ -1,0 +1,222 @@
+//! `daemon.engage = "pilot"` against the mock autopilot, both flavours, through the real
+//! binary: infotrack never arms; the pilot takes off with the RC and switches to OFFBOARD
+//! (PX4) or GUIDED (ArduPilot); infotrack tracks only then, lets go at once when the pilot
+//! switches away, takes over again at the next switch, and never changes the pilot's mode
+//! when it stops. The GCS hears each hand-over (STATUSTEXT, read back from the tlog).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use common::{eventually, sigterm, udp_mock};
+use infotrack::autopilot::modes::{Flavor, Mode};
+use infotrack::mock::server::MockHandle;
+use infotrack::mock::MockConfig;
+use mavlink::dialects::ardupilotmega::MavMessage;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The lab config with `daemon.engage = "pilot"`.
+fn pilot_config(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("config/default.toml")).unwrap();
+    let mut table: toml::Table = text.parse().unwrap();
+    table
+        .entry("daemon")
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+        .as_table_mut()
+        .unwrap()
+        .insert("engage".into(), toml::Value::String("pilot".into()));
+    let path = dir.join("pilot.toml");
+    std::fs::write(&path, toml::to_string(&table).unwrap()).unwrap();
+    path
+}
+
+/// The pilot flips the switch to `mode`, retrying for up to 5 s (PX4 refuses OFFBOARD
+/// until infotrack's stream is fresh).
+async fn switch(mock: &MockHandle, mode: Mode) {
+    let mut last = Err(String::new());
+    for _ in 0..100 {
+        last = mock.with(|m| m.pilot_switch(mode));
+        if last.is_ok() {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("the switch to {mode:?} was refused: {last:?}");
+}
+
+fn horizontal(mock: &MockHandle) -> [f64; 2] {
+    mock.with(|m| {
+        let p = m.position_ned_m();
+        [p[0], p[1]]
+    })
+}
+
+fn statustexts(tlog: &Path) -> Vec<String> {
+    infotrack::autopilot::tlog::read(tlog)
+        .unwrap()
+        .into_iter()
+        .filter_map(|(_, _, m)| match m {
+            MavMessage::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
+            _ => None,
+        })
+        .collect()
+}
+
+async fn pilot_hands_over_and_takes_back(flavor: Flavor) {
+    let companion = Mode::companion_for(flavor);
+    let (mock, port) = udp_mock(MockConfig::new(flavor)).await;
+    let dir = tempfile::tempdir().unwrap();
+    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .args([
+            "run",
+            "--quiet",
+            "--duration",
+            "0",
+            "--motion",
+            "cv",
+            "--config",
+        ])
+        .arg(pilot_config(dir.path()))
+        .arg("--vehicle")
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .arg("--out")
+        .arg(dir.path().join("flight"))
+        .current_dir(root())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+
+    // On the ground: infotrack never arms, never changes the mode, sends no setpoint.
+    let initial = mock.with(|m| m.mode());
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let before = mock.with(|m| (m.armed(), m.mode(), m.setpoints_received()));
+    assert_eq!(before, (false, initial, 0), "{flavor:?}");
+
+    // The pilot takes off in the position mode.
+    mock.with(|m| m.pilot_take_off(1.2));
+    let airborne = eventually(15.0, || mock.with(|m| -m.position_ned_m()[2] > 1.0)).await;
+    assert!(airborne, "{flavor:?}: the pilot's takeoff");
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    // Airborne, not engaged: PX4 gets the vehicle's own position streamed (so OFFBOARD can
+    // be entered), ArduPilot nothing; the pilot's mode stays.
+    let streamed = mock.with(|m| m.setpoints_received());
+    match flavor {
+        Flavor::Px4 => assert!(streamed > 10, "PX4 stream before OFFBOARD: {streamed}"),
+        Flavor::ArduPilot => assert_eq!(streamed, 0, "ArduPilot: nothing before GUIDED"),
+    }
+    assert_eq!(mock.with(|m| m.mode()), Mode::Position, "{flavor:?}");
+    let hover = horizontal(&mock);
+
+    // The switch: infotrack tracks (the vehicle moves toward the EER's waypoints).
+    switch(&mock, companion).await;
+    let moved = eventually(15.0, || {
+        let p = horizontal(&mock);
+        (p[0] - hover[0]).hypot(p[1] - hover[1]) > 0.2
+    })
+    .await;
+    assert!(moved, "{flavor:?}: no tracking after the switch");
+
+    // The pilot takes it back: infotrack stops commanding as soon as the vehicle's
+    // heartbeat (1 Hz, as both firmwares send it) says so, and does not take it back.
+    switch(&mock, Mode::Position).await;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let released_at = horizontal(&mock);
+    let count = mock.with(|m| m.setpoints_received());
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let p = horizontal(&mock);
+    assert!(
+        (p[0] - released_at[0]).hypot(p[1] - released_at[1]) < 0.1,
+        "{flavor:?}: the vehicle moved after the release"
+    );
+    assert_eq!(mock.with(|m| m.mode()), Mode::Position, "{flavor:?}");
+    if flavor == Flavor::ArduPilot {
+        assert_eq!(
+            mock.with(|m| m.setpoints_received()),
+            count,
+            "ArduPilot: nothing sent after the release"
+        );
+    }
+
+    // Again: engaged at the next switch; then the pilot switches away and infotrack stops
+    // (SIGTERM) without touching the pilot's mode.
+    switch(&mock, companion).await;
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    switch(&mock, Mode::Position).await;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let out = sigterm(child).await;
+    let all = format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "{flavor:?}: {all}");
+    assert_eq!(mock.with(|m| m.mode()), Mode::Position, "{flavor:?}: {all}");
+
+    let texts = statustexts(&dir.path().join("flight/link.tlog"));
+    let count = |s: &str| texts.iter().filter(|t| t.contains(s)).count();
+    assert_eq!(count("engaged by the pilot"), 2, "{texts:?}");
+    assert_eq!(count("released"), 2, "{texts:?}");
+    assert_eq!(count("stopped (signal); pilot has it"), 1, "{texts:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn px4_pilot_hands_over_in_offboard_and_takes_back() {
+    pilot_hands_over_and_takes_back(Flavor::Px4).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ardupilot_pilot_hands_over_in_guided_and_takes_back() {
+    pilot_hands_over_and_takes_back(Flavor::ArduPilot).await;
+}
+
+/// While infotrack has the vehicle, its clean stop holds it (as with `auto`); a pilot
+/// config with the in-process mock (no pilot) is refused before anything starts.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn engaged_at_the_stop_it_holds_and_the_in_process_mock_is_refused() {
+    let (mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = pilot_config(dir.path());
+    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .args([
+            "run",
+            "--quiet",
+            "--duration",
+            "0",
+            "--motion",
+            "cv",
+            "--config",
+        ])
+        .arg(&cfg)
+        .arg("--vehicle")
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .current_dir(root())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    mock.with(|m| m.pilot_take_off(1.2));
+    assert!(eventually(15.0, || mock.with(|m| -m.position_ned_m()[2] > 1.0)).await);
+    switch(&mock, Mode::Offboard).await;
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let out = sigterm(child).await;
+    assert!(out.status.success());
+    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+
+    let refused = std::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .args(["run", "--quiet", "--duration", "1", "--config"])
+        .arg(&cfg)
+        .current_dir(root())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        err.contains("daemon.engage = \"pilot\" needs a vehicle with a pilot"),
+        "{err}"
+    );
+}
