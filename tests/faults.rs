@@ -476,3 +476,38 @@ async fn the_mock_process_refuses_nan_commands_and_says_why() {
         }
     }
 }
+
+/// Row "a failure after takeoff leaves the vehicle armed with no hold": the tracker's
+/// thread dies in flight; the supervisor puts the vehicle in hold, it keeps its altitude,
+/// and the run ends with an error that says so.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pipeline_that_dies_in_flight_leaves_the_vehicle_in_hold() {
+    for flavor in [Flavor::Px4, Flavor::ArduPilot] {
+        let (mock, port) = udp_mock(MockConfig::new(flavor)).await;
+        let out = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
+            .args(["run", "--quiet", "--duration", "60", "--motion", "cv"])
+            .args(["--inject", "pipeline-panic@3+1", "--vehicle"])
+            .arg(format!("udpout:127.0.0.1:{port}"))
+            .current_dir(root())
+            .output()
+            .await
+            .unwrap();
+        let all = text(&out);
+        assert!(!out.status.success(), "{flavor:?}: {all}");
+        assert!(
+            all.contains("the pipeline thread died with a panic (the vehicle was put in hold)"),
+            "{flavor:?}: {all}"
+        );
+        let hold = infotrack::autopilot::modes::Mode::hold_for(flavor);
+        assert_eq!(mock.with(|m| m.mode()), hold, "{flavor:?}");
+        assert!(mock.with(|m| m.armed()), "{flavor:?}: still flying");
+        let alt = || mock.with(|m| -m.position_ned_m()[2]);
+        let before = alt();
+        tokio::time::sleep(Duration::from_secs(3)).await;
+        assert!(
+            before > 1.0 && (alt() - before).abs() < 0.3,
+            "{flavor:?}: altitude {before} -> {}",
+            alt()
+        );
+    }
+}

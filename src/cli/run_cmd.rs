@@ -41,8 +41,8 @@ pub struct RunArgs {
     #[arg(long)]
     quiet: bool,
     /// Inject a fault: KIND@START+DURATION in seconds after tracking starts, KIND one of
-    /// camera-freeze, link-cut, loss=PERCENT (the last two need the in-process mock).
-    /// Repeatable.
+    /// camera-freeze, link-cut, loss=PERCENT (these two need the in-process mock),
+    /// pipeline-panic (the tracker thread dies; the vehicle must end in hold). Repeatable.
     #[arg(long)]
     inject: Vec<daemon::ScheduledFault>,
 }

@@ -129,6 +129,9 @@ pub enum FaultKind {
     LinkCut,
     /// This share of MAVLink messages is lost, percent (in-process mock only).
     PacketLoss(f64),
+    /// The pipeline thread panics (a bug in the tracker, simulated): the supervisor must
+    /// hold the vehicle.
+    PipelinePanic,
 }
 
 /// A fault from `at_s` (seconds after tracking starts) for `duration_s`.
@@ -149,13 +152,14 @@ impl FaultKind {
             Self::CameraFreeze => "camera-freeze".into(),
             Self::LinkCut => "link-cut".into(),
             Self::PacketLoss(p) => format!("loss={p}"),
+            Self::PipelinePanic => "pipeline-panic".into(),
         }
     }
 }
 
 /// A `--inject` value that is not a fault.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
-#[error("`{0}`: expected KIND@START+DURATION (seconds), KIND one of camera-freeze, link-cut, loss=PERCENT; e.g. camera-freeze@20+5")]
+#[error("`{0}`: expected KIND@START+DURATION (seconds), KIND one of camera-freeze, link-cut, loss=PERCENT, pipeline-panic; e.g. camera-freeze@20+5")]
 pub struct BadFault(pub String);
 
 impl std::str::FromStr for ScheduledFault {
@@ -174,6 +178,7 @@ impl std::str::FromStr for ScheduledFault {
         let kind = match kind {
             "camera-freeze" => FaultKind::CameraFreeze,
             "link-cut" => FaultKind::LinkCut,
+            "pipeline-panic" => FaultKind::PipelinePanic,
             k => match k.strip_prefix("loss=").map(str::parse::<f64>) {
                 Some(Ok(p)) if (0.0..=100.0).contains(&p) => FaultKind::PacketLoss(p),
                 _ => return Err(usage()),
@@ -455,7 +460,7 @@ async fn connect(
         && opts
             .faults
             .iter()
-            .any(|f| !matches!(f.kind, FaultKind::CameraFreeze))
+            .any(|f| !matches!(f.kind, FaultKind::CameraFreeze | FaultKind::PipelinePanic))
     {
         return Err(DaemonError::LinkFaultNeedsMock);
     }
@@ -700,6 +705,13 @@ impl Supervisor<'_> {
                 if on { "begins" } else { "ends" }
             );
             match (f.kind, mock) {
+                (FaultKind::PipelinePanic, _) if on => {
+                    self.shared
+                        .to_pipeline
+                        .lock()
+                        .expect("shared poisoned")
+                        .panic = true
+                }
                 (FaultKind::CameraFreeze, _) => {
                     self.shared
                         .to_pipeline

@@ -66,6 +66,8 @@ pub struct SupervisorView {
     pub faults: String,
     /// The camera delivers nothing while set (fault injection: a frozen camera).
     pub camera_frozen: bool,
+    /// The pipeline panics at its next tick (fault injection: a tracker bug).
+    pub panic: bool,
 }
 
 /// What the pipeline tells the supervisor, rewritten at each filter step and decision.
@@ -464,6 +466,8 @@ impl Pipeline {
                 .step(&self.world.road, self.physics_dt_s, &mut self.rng_target);
         }
         let view = self.shared.supervisor_view();
+        // Only ever set by `--inject pipeline-panic`, to prove the supervisor's hold.
+        assert!(!view.panic, "injected fault: pipeline-panic");
         let snapshot = view.vehicle;
         self.sensor.camera_frozen = view.camera_frozen;
         if let Some(s) = snapshot.filter(|s| !s.link_lost) {
