@@ -47,6 +47,9 @@ enum Command {
     Run(run_cmd::RunArgs),
     /// Re-run estimation and guidance on a recorded `infotrack run` flight and compare.
     Replay(run_cmd::ReplayArgs),
+    /// Calibrate a camera from chessboard views (a folder or a live camera) into the OpenCV
+    /// YAML that `daemon.calibration` reads.
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 #[derive(clap::Args)]
@@ -216,7 +219,7 @@ struct BenchArgs {
 
 mod cli;
 
-use cli::{detect, run_cmd};
+use cli::{calibrate, detect, run_cmd};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -247,6 +250,7 @@ fn main() -> ExitCode {
         Command::Dataset(a) => dataset(a),
         Command::MockAutopilot(a) => mock_autopilot(a),
         Command::Params(a) => params(a),
+        Command::Calibrate(a) => calibrate::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

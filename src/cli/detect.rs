@@ -25,7 +25,8 @@ struct JsonDetection {
 
 const IMAGE_EXTENSIONS: [&str; 8] = ["png", "jpg", "jpeg", "bmp", "pgm", "ppm", "tif", "tiff"];
 
-fn is_image(p: &Path) -> bool {
+/// Whether `p` has an image file extension OpenCV reads.
+pub fn is_image(p: &Path) -> bool {
     p.extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))

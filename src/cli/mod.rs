@@ -3,6 +3,7 @@
 
 pub mod altitude_bench;
 pub mod bench;
+pub mod calibrate;
 pub mod detect;
 pub mod detect_bench;
 pub mod run_cmd;

@@ -6,6 +6,7 @@
 //! The geometry (`camera_model`, `projection`, `render`) is pure; OpenCV is confined to
 //! `cv_io` and `capture`.
 
+pub mod calibration;
 pub mod camera_model;
 pub mod capture;
 pub mod cv_io;
