@@ -189,7 +189,7 @@ fn intrinsics(k: &Mat, d: &Mat, size: Size) -> Result<Intrinsics, VisionError> {
     for (i, v) in dist
         .iter_mut()
         .enumerate()
-        .take((d.total() as usize).min(5))
+        .take(d.total().min(5))
     {
         *v = at(d, 0, i as i32)?;
     }
