@@ -79,7 +79,7 @@ fn folder_views(dir: &Path) -> Result<Vec<(String, GrayImage)>> {
 
 /// `frames` views from a camera, one every `every_s` seconds.
 fn camera_views(source: &str, frames: usize, every_s: f64) -> Result<Vec<(String, GrayImage)>> {
-    if !(1..=1000).contains(&frames) || !(every_s.is_finite() && every_s >= 0.0) {
+    if !((1..=1000).contains(&frames) && every_s.is_finite() && every_s >= 0.0) {
         bail!("--frames must be 1-1000 and --every-s >= 0 (got {frames}, {every_s})");
     }
     let mut cam = Camera::open(CaptureConfig {
