@@ -23,6 +23,7 @@ pub mod config;
 pub mod daemon;
 pub mod estimation;
 pub mod frames;
+pub mod geodesy;
 pub mod guidance;
 pub mod metrics;
 pub mod mock;

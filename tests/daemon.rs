@@ -140,6 +140,53 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
         .filter(|m| matches!(m, MavMessage::NAMED_VALUE_FLOAT(v) if v.name.to_str().unwrap_or("") == "IT_NEFF"))
         .count();
     assert!((80..=95).contains(&neff), "{neff} IT_NEFF values in 90 s");
+    // The estimate on the GCS map: ADS-B traffic `TARGET` once a second whose WGS84
+    // position, taken back to world ENU about the mock's origin, is where the filter's
+    // estimate was (east stays east, north stays north).
+    let mock_cfg = MockConfig::new(Flavor::Px4);
+    let origin = infotrack::geodesy::GeodeticWgs84 {
+        lat_deg: mock_cfg.origin_lat_deg,
+        lon_deg: mock_cfg.origin_lon_deg,
+        alt_m: mock_cfg.origin_alt_m,
+    };
+    let on_map: Vec<[f64; 3]> = ours
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::ADSB_VEHICLE(a) if a.callsign.to_str().unwrap_or("") == "TARGET" => {
+                Some(origin.enu_of(&infotrack::geodesy::GeodeticWgs84 {
+                    lat_deg: a.lat as f64 * 1e-7,
+                    lon_deg: a.lon as f64 * 1e-7,
+                    alt_m: a.altitude as f64 * 1e-3,
+                }))
+            }
+            _ => None,
+        })
+        .collect();
+    assert!(
+        (80..=95).contains(&on_map.len()),
+        "{} on the map",
+        on_map.len()
+    );
+    let mut off: Vec<f64> = on_map
+        .iter()
+        .map(|p| {
+            r.output
+                .records
+                .iter()
+                .map(|s| (s.step.estimate_enu.x - p[0]).hypot(s.step.estimate_enu.y - p[1]))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    off.sort_by(f64::total_cmp);
+    assert!(
+        off[off.len() / 2] < 0.1,
+        "median {} m off an estimate",
+        off[off.len() / 2]
+    );
+    assert!(
+        on_map.iter().all(|p| p[2].abs() < 0.5),
+        "on the ground: {on_map:?}"
+    );
     replays_exactly(&cfg, &r);
 
     // `infotrack sim --vision` (same frames, detector and filter, but an ideal agent and no

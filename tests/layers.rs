@@ -9,6 +9,7 @@ use std::path::Path;
 /// The core: pure, synchronous, no I/O layer.
 const CORE: &[&str] = &[
     "frames",
+    "geodesy",
     "world",
     "motion",
     "estimation",

@@ -162,6 +162,10 @@ impl LinkConfig {
 type SharedTlog = Option<Arc<super::tlog::Tlog>>;
 type SharedState = Arc<Mutex<VehicleState>>;
 
+/// The ICAO address the target estimate is reported under (`send_target_on_map`): in the
+/// range ICAO leaves unassigned to aircraft (0xF00000 and up), so it is never a real one.
+pub const TARGET_ICAO_ADDRESS: u32 = 0xF1_7A_60;
+
 /// The newest STATUSTEXT waiting in `rx`, into `said` (events lost to a lagging receiver
 /// are skipped).
 fn latest_text(rx: &mut broadcast::Receiver<LinkEvent>, said: &mut Option<String>) {
@@ -400,6 +404,9 @@ pub struct VehicleState {
     pub attitude: Option<(Instant, [f32; 3])>,
     /// GLOBAL_POSITION_INT lat, lon (deg), relative altitude (m), and when.
     pub global: Option<(Instant, f64, f64, f64)>,
+    /// GLOBAL_POSITION_INT's altitude above mean sea level minus its relative altitude: the
+    /// height of the vehicle's home, m (AMSL).
+    pub home_alt_amsl_m: Option<f64>,
     /// EXTENDED_SYS_STATE landed state and when.
     pub landed: Option<(Instant, MavLandedState)>,
     /// SYS_STATUS battery voltage (V) and when.
@@ -658,6 +665,35 @@ impl VehicleLink {
             time_boot_ms: self.started.elapsed().as_millis() as u32,
             name: cut.as_str().into(),
             value,
+        }))
+        .await
+    }
+
+    /// The tracker's target estimate as an ADS-B traffic report (ADSB_VEHICLE, callsign
+    /// `TARGET`, ICAO address [`TARGET_ICAO_ADDRESS`]): QGroundControl and Mission Planner
+    /// draw ADS-B traffic on their maps, so the operator sees the estimate move there.
+    /// `ground_alt_amsl_m`: the ground's height above mean sea level.
+    pub async fn send_target_on_map(
+        &self,
+        at: crate::geodesy::GeodeticWgs84,
+        ground_alt_amsl_m: f64,
+    ) -> Result<(), LinkError> {
+        if !(at.lat_deg.is_finite() && at.lon_deg.is_finite() && ground_alt_amsl_m.is_finite()) {
+            return Err(LinkError::NonFiniteSetpoint);
+        }
+        self.send(&MavMessage::ADSB_VEHICLE(ADSB_VEHICLE_DATA {
+            ICAO_address: TARGET_ICAO_ADDRESS,
+            lat: (at.lat_deg * 1e7).round() as i32,
+            lon: (at.lon_deg * 1e7).round() as i32,
+            altitude_type: AdsbAltitudeType::ADSB_ALTITUDE_TYPE_GEOMETRIC,
+            altitude: (ground_alt_amsl_m * 1e3).round() as i32,
+            callsign: "TARGET".into(),
+            emitter_type: AdsbEmitterType::ADSB_EMITTER_TYPE_SERVICE_SURFACE,
+            tslc: 1,
+            flags: AdsbFlags::ADSB_FLAGS_VALID_COORDS
+                | AdsbFlags::ADSB_FLAGS_VALID_ALTITUDE
+                | AdsbFlags::ADSB_FLAGS_VALID_CALLSIGN,
+            ..Default::default()
         }))
         .await
     }
@@ -1189,6 +1225,7 @@ fn on_message(
                 g.lon as f64 * 1e-7,
                 g.relative_alt as f64 * 1e-3,
             ));
+            s.home_alt_amsl_m = Some((g.alt as f64 - g.relative_alt as f64) * 1e-3);
         }
         MavMessage::EXTENDED_SYS_STATE(e) => s.landed = Some((now, e.landed_state)),
         MavMessage::SYS_STATUS(st) => s.battery_v = Some((now, st.voltage_battery as f64 * 1e-3)),

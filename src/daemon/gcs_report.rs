@@ -2,9 +2,10 @@
 //! started, target acquired, lost, found again, the lost-target fallback, camera lost and
 //! back, flight records that stopped on a full disk, the stop and hold) and, once a second, NAMED_VALUE_FLOATs with the tracker's state
 //! (`IT_SEEN` 0/1, `IT_NEFF` effective sample size, `IT_H` entropy, `IT_RAD_M` the
-//! estimate's one-sigma radius in metres). Every ground station shows STATUSTEXT in its
-//! messages panel; QGroundControl plots NAMED_VALUE_FLOATs in its MAVLink Inspector and
-//! Mission Planner in its Quick tab. Pure: the supervisor sends what this returns.
+//! estimate's one-sigma radius in metres), with the target estimate as ADS-B traffic
+//! (ADSB_VEHICLE, callsign `TARGET`) that QGroundControl and Mission Planner draw on their
+//! maps. Every ground station shows STATUSTEXT in its messages panel; QGroundControl plots
+//! NAMED_VALUE_FLOATs in its MAVLink Inspector and Mission Planner in its Quick tab. Pure: the supervisor sends what this returns.
 
 use std::time::Duration;
 
@@ -144,6 +145,7 @@ mod tests {
             state,
             radius_m: 2.0,
             records_failed: false,
+            estimate_enu: [1.0, 2.0],
         }
     }
 

@@ -865,6 +865,34 @@ impl Supervisor<'_> {
                     tracing::debug!("NAMED_VALUE_FLOAT {name}: {e}");
                 }
             }
+            self.put_target_on_map(status.estimate_enu).await;
+        }
+    }
+
+    /// The estimate as ADS-B traffic on the GCS map: placed from the vehicle's own WGS84
+    /// position by the estimate's world-ENU offset from the vehicle; on the ground (the
+    /// vehicle's home height). Nothing until the vehicle reports a global position.
+    async fn put_target_on_map(&self, estimate_enu: [f64; 2]) {
+        let link = &self.vehicle.link;
+        let s = link.state();
+        let (Some((_, lat, lon, _)), Some(home_alt), Some((_, p, _))) =
+            (s.global, s.home_alt_amsl_m, s.local_ned)
+        else {
+            return;
+        };
+        let vehicle = p.to_enu();
+        let here = crate::geodesy::GeodeticWgs84 {
+            lat_deg: lat,
+            lon_deg: lon,
+            alt_m: 0.0,
+        };
+        let target = here.offset_by_enu([
+            estimate_enu[0] - vehicle.x_east_m,
+            estimate_enu[1] - vehicle.y_north_m,
+            0.0,
+        ]);
+        if let Err(e) = link.send_target_on_map(target, home_alt).await {
+            tracing::debug!("ADSB_VEHICLE: {e}");
         }
     }
 

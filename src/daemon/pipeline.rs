@@ -55,6 +55,8 @@ pub struct Status {
     /// Whether the flight records stopped being written (a full disk; the reason is in the
     /// log).
     pub records_failed: bool,
+    /// The target estimate, world ENU, m.
+    pub estimate_enu: [f64; 2],
 }
 
 /// What the supervisor tells the pipeline, rewritten every 20 ms.
@@ -539,6 +541,7 @@ impl Pipeline {
                 .recorder
                 .as_ref()
                 .is_some_and(|r| r.failure().is_some()),
+            estimate_enu: [step.record.estimate_enu.x, step.record.estimate_enu.y],
         });
         self.out.records.push(FlightRecord {
             pose: self

@@ -940,15 +940,18 @@ impl MockAutopilot {
         })
     }
 
-    /// Latitude and longitude (degrees) of the current position, from the origin by a local
-    /// flat-earth approximation (good to centimetres over a few kilometres).
+    /// Latitude and longitude (degrees, WGS84) of the current position: the local NED
+    /// position about the configured origin, exactly (`geodesy`).
     pub fn latlon(&self) -> (f64, f64) {
-        const R: f64 = 6_378_137.0;
-        let lat = self.cfg.origin_lat_deg + (self.state.pos_ned_m[0] / R).to_degrees();
-        let lon = self.cfg.origin_lon_deg
-            + (self.state.pos_ned_m[1] / (R * self.cfg.origin_lat_deg.to_radians().cos()))
-                .to_degrees();
-        (lat, lon)
+        // The local NED frame's origin in WGS84, as the firmware's estimator keeps it.
+        let origin = crate::geodesy::GeodeticWgs84 {
+            lat_deg: self.cfg.origin_lat_deg,
+            lon_deg: self.cfg.origin_lon_deg,
+            alt_m: self.cfg.origin_alt_m,
+        };
+        let p = self.state.pos_ned_m;
+        let here = origin.offset_by_enu([p[1], p[0], -p[2]]);
+        (here.lat_deg, here.lon_deg)
     }
 }
 

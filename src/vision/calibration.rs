@@ -186,11 +186,7 @@ fn intrinsics(k: &Mat, d: &Mat, size: Size) -> Result<Intrinsics, VisionError> {
             .map_err(cv("calibration matrix"))
     };
     let mut dist = [0.0; 5];
-    for (i, v) in dist
-        .iter_mut()
-        .enumerate()
-        .take(d.total().min(5))
-    {
+    for (i, v) in dist.iter_mut().enumerate().take(d.total().min(5)) {
         *v = at(d, 0, i as i32)?;
     }
     Ok(Intrinsics {
