@@ -9,7 +9,8 @@
 //!
 //! ONNX Runtime is loaded at run time from `libonnxruntime.so` (the `ort` crate's
 //! `load-dynamic`): from `motion.onnxruntime_library` in the config, else `ORT_DYLIB_PATH`,
-//! else `.deps/onnxruntime/` where `scripts/setup.sh` puts the library of PyPI's
+//! else beside the program (where `scripts/install.sh` puts it), else `.deps/onnxruntime/`
+//! where `scripts/setup.sh` puts the library of PyPI's
 //! `onnxruntime==1.31.1` wheel. One environment per process, held for the process's life.
 
 use std::path::{Path, PathBuf};
@@ -151,6 +152,13 @@ pub fn library_candidates(configured: Option<&Path>) -> Vec<PathBuf> {
     if let Some(p) = std::env::var_os("ORT_DYLIB_PATH") {
         v.push(PathBuf::from(p));
     }
+    // Installed (scripts/install.sh): beside the program.
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(Path::to_path_buf))
+    {
+        v.push(dir.join(ORT_LIBRARY_FILE));
+    }
     v.push(PathBuf::from(".deps/onnxruntime").join(ORT_LIBRARY_FILE));
     v.push(
         Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -173,6 +181,7 @@ pub fn environment(configured: Option<&Path>) -> Result<Environment, MotionError
                     candidates.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
                 ));
             };
+            tracing::info!("ONNX Runtime loaded from {}", lib.display());
             let builder = ort::init_from(lib)
                 .map_err(|e| format!("cannot load ONNX Runtime from {}: {e}", lib.display()))?;
             builder
