@@ -47,9 +47,19 @@ enum Command {
     Run(run_cmd::RunArgs),
     /// Re-run estimation and guidance on a recorded `infotrack run` flight and compare.
     Replay(run_cmd::ReplayArgs),
+    /// Print a configuration with every key filled in (defaults included), as TOML: what a
+    /// config file means. `docs/config.md` lists every key.
+    Config(ConfigArgs),
     /// Calibrate a camera from chessboard views (a folder or a live camera) into the OpenCV
     /// YAML that `daemon.calibration` reads.
     Calibrate(calibrate::CalibrateArgs),
+}
+
+#[derive(clap::Args)]
+struct ConfigArgs {
+    /// Configuration file; without it, the embedded config/default.toml.
+    #[arg(long)]
+    config: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -251,6 +261,10 @@ fn main() -> ExitCode {
         Command::MockAutopilot(a) => mock_autopilot(a),
         Command::Params(a) => params(a),
         Command::Calibrate(a) => calibrate::run(a),
+        Command::Config(a) => load_config(a.config.as_deref()).and_then(|c| {
+            print!("{}", toml::to_string(&c).context("the config as TOML")?);
+            Ok(())
+        }),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -369,11 +369,13 @@ pub struct MotionConfig {
     /// Particle constant-velocity model: the largest speed a particle is given, m/s.
     pub cv_max_speed_mps: f64,
     /// The learned model for `--motion dmmn`: an ONNX file with `dmmn.json` beside it.
-    /// A relative path is taken from the current directory.
+    /// A relative path is taken from the config file's folder; the default
+    /// `models/dmmn.onnx` (the lab's) from the current directory.
     #[serde(default = "default_dmmn_model")]
     pub dmmn_model: PathBuf,
-    /// The ONNX Runtime shared library to load; default: `ORT_DYLIB_PATH`, then
-    /// `.deps/onnxruntime/libonnxruntime.so.1.31.1` (installed by `scripts/setup.sh`).
+    /// The ONNX Runtime shared library to load; default: `ORT_DYLIB_PATH`, then beside the
+    /// program (`scripts/install.sh`), then `.deps/onnxruntime/libonnxruntime.so.1.31.1`
+    /// (`scripts/setup.sh`).
     #[serde(default)]
     pub onnxruntime_library: Option<PathBuf>,
     /// Use a learned model whose metadata says it was trained for another world (other
