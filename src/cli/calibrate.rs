@@ -9,7 +9,7 @@ use infotrack::vision::capture::{Camera, CaptureConfig};
 use infotrack::vision::cv_io;
 use infotrack::vision::image::GrayImage;
 
-use super::detect::is_image;
+use super::detect::image_files;
 
 /// `infotrack calibrate` arguments.
 #[derive(clap::Args)]
@@ -54,15 +54,7 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
 
 /// Every image of a folder, by name; one that cannot be read is reported and skipped.
 fn folder_views(dir: &Path) -> Result<Vec<(String, GrayImage)>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file() && is_image(p))
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        bail!("{}: no image files", dir.display());
-    }
+    let files = image_files(dir)?;
     let mut views = Vec::new();
     for p in files {
         let name = p.file_name().map_or_else(

@@ -32,6 +32,24 @@ pub fn is_image(p: &Path) -> bool {
         .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
+/// The image files of a folder, sorted by name; none is an error.
+pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file() && is_image(p))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!(
+            "{}: no image files ({})",
+            dir.display(),
+            IMAGE_EXTENSIONS.join(", ")
+        );
+    }
+    Ok(files)
+}
+
 /// Calls `f` on every frame of `path`, in order. A file of a folder that cannot be read,
 /// or a video that ends before the frame count its header declares, is a problem returned
 /// (and the rest is still read); anything else stops with an error.
@@ -40,19 +58,7 @@ fn for_each_frame(
     mut f: impl FnMut(u64, &GrayImage) -> Result<()>,
 ) -> Result<Vec<String>> {
     if path.is_dir() {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(path)
-            .with_context(|| format!("cannot list {}", path.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file() && is_image(p))
-            .collect();
-        files.sort();
-        if files.is_empty() {
-            bail!(
-                "{}: no image files ({})",
-                path.display(),
-                IMAGE_EXTENSIONS.join(", ")
-            );
-        }
+        let files = image_files(path)?;
         let mut problems = Vec::new();
         for (i, p) in files.iter().enumerate() {
             match cv_io::read_image(p) {

@@ -157,25 +157,7 @@ fn solve(
         criteria,
     )
     .map_err(cv("calibrateCamera"))?;
-    let mut errors = Vec::with_capacity(found.len());
-    for (i, seen) in image.iter().enumerate() {
-        let mut projected = Vector::<Point2f>::new();
-        calib3d::project_points_def(
-            &object.get(i).map_err(cv("views"))?,
-            &rvecs.get(i).map_err(cv("rvecs"))?,
-            &tvecs.get(i).map_err(cv("tvecs"))?,
-            &k,
-            &d,
-            &mut projected,
-        )
-        .map_err(cv("projectPoints"))?;
-        let sq: f64 = seen
-            .iter()
-            .zip(projected.iter())
-            .map(|(a, b)| ((a.x - b.x) as f64).powi(2) + ((a.y - b.y) as f64).powi(2))
-            .sum();
-        errors.push((sq / seen.len() as f64).sqrt());
-    }
+    let errors = errors_with(board, found, &k, &d)?;
     Ok((k, d, errors, rms))
 }
 
@@ -267,7 +249,8 @@ pub fn calibrate(views: &[(String, GrayImage)], board: &Board) -> Result<Calibra
     })
 }
 
-/// Each view's RMS error for a given camera: its pose by solvePnP, then projection.
+/// Each view's RMS reprojection error for a camera (K, distortion): the view's pose by
+/// solvePnP, then projection.
 fn errors_with(
     board: &Board,
     found: &[&Vector<Point2f>],
