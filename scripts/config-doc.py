@@ -25,6 +25,7 @@ SOURCES = [
     "src/vision/detector.rs",
     "src/vision/projection.rs",
     "src/guidance/lawn.rs",
+    "src/geodesy.rs",
 ]
 SECTION_DOC = {
     "": "Top level",
@@ -106,7 +107,11 @@ def value_text(v):
 
 
 def rows(all_structs, name, prefix, values, limits, out):
-    for field, ty, doc in all_structs[name]:
+    # A section's own keys first, then its sub-sections (as TOML writes them).
+    fields = sorted(
+        all_structs[name], key=lambda f: inner_struct(f[1], all_structs) is not None
+    )
+    for field, ty, doc in fields:
         key = f"{prefix}{field}"
         inner = inner_struct(ty, all_structs)
         v = values.get(field) if isinstance(values, dict) else None

@@ -4,9 +4,11 @@
 //! ellipsoid.
 
 use map_3d::Ellipsoid;
+use serde::{Deserialize, Serialize};
 
 /// A point in WGS84.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GeodeticWgs84 {
     /// Latitude, degrees north.
     pub lat_deg: f64,
@@ -33,6 +35,12 @@ impl GeodeticWgs84 {
             lon_deg: lon.to_degrees(),
             alt_m: alt,
         }
+    }
+
+    /// Horizontal distance to `p` along the local ground plane, m.
+    pub fn horizontal_distance_m(&self, p: &GeodeticWgs84) -> f64 {
+        let [e, n, _] = self.enu_of(p);
+        e.hypot(n)
     }
 
     /// Where `p` lies in the local ENU frame whose origin is `self`: east, north, up, m.

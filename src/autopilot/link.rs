@@ -407,6 +407,9 @@ pub struct VehicleState {
     /// GLOBAL_POSITION_INT's altitude above mean sea level minus its relative altitude: the
     /// height of the vehicle's home, m (AMSL).
     pub home_alt_amsl_m: Option<f64>,
+    /// GPS_GLOBAL_ORIGIN: where the vehicle's local NED frame is on Earth (its estimator's
+    /// origin). Heights are AMSL as the message gives them.
+    pub global_origin: Option<crate::geodesy::GeodeticWgs84>,
     /// EXTENDED_SYS_STATE landed state and when.
     pub landed: Option<(Instant, MavLandedState)>,
     /// SYS_STATUS battery voltage (V) and when.
@@ -737,6 +740,15 @@ impl VehicleLink {
             attempts: self.cfg.attempts,
             hint: self.silence_hint(),
         })
+    }
+
+    /// MAV_CMD_REQUEST_MESSAGE: the vehicle sends message `id` once.
+    pub async fn request_message(&self, id: u32) -> Result<(), LinkError> {
+        self.command(
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [id as f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await
     }
 
     /// MAV_CMD_SET_MESSAGE_INTERVAL for message `id` at `hz`.
@@ -1228,6 +1240,13 @@ fn on_message(
             s.home_alt_amsl_m = Some((g.alt as f64 - g.relative_alt as f64) * 1e-3);
         }
         MavMessage::EXTENDED_SYS_STATE(e) => s.landed = Some((now, e.landed_state)),
+        MavMessage::GPS_GLOBAL_ORIGIN(o) => {
+            s.global_origin = Some(crate::geodesy::GeodeticWgs84 {
+                lat_deg: o.latitude as f64 * 1e-7,
+                lon_deg: o.longitude as f64 * 1e-7,
+                alt_m: o.altitude as f64 * 1e-3,
+            })
+        }
         MavMessage::SYS_STATUS(st) => s.battery_v = Some((now, st.voltage_battery as f64 * 1e-3)),
         MavMessage::PARAM_VALUE(p) => {
             let _ = events.send(LinkEvent::Param {

@@ -90,6 +90,30 @@ pub struct Config {
     /// Where the operator says the target is when tracking starts (optional).
     #[serde(default)]
     pub acquisition: Option<AcquisitionConfig>,
+    /// Where the world is on Earth; without it the world is only ENU metres about the
+    /// vehicle's local origin, wherever that is.
+    #[serde(default)]
+    pub world: Option<WorldConfig>,
+}
+
+/// Where the world is on Earth (`[world]`). The world's roads, occlusions, geofence and cue
+/// are ENU metres about `origin`; infotrack flies them in the vehicle's local frame, so it
+/// engages only when the vehicle's own origin (GPS_GLOBAL_ORIGIN) is `origin`, within
+/// `origin_tolerance_m`: a vehicle whose origin is elsewhere (powered up somewhere else)
+/// would see the whole world moved by that much.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldConfig {
+    /// The world ENU frame's origin: `{ lat_deg, lon_deg, alt_m }` (WGS84, height above
+    /// the ellipsoid, m).
+    pub origin: crate::geodesy::GeodeticWgs84,
+    /// How far the vehicle's origin may be from `origin`, horizontally, m.
+    #[serde(default = "default_origin_tolerance_m")]
+    pub origin_tolerance_m: f64,
+}
+
+fn default_origin_tolerance_m() -> f64 {
+    5.0
 }
 
 /// The operator's cue: where the target is when tracking starts, and how sure they are.

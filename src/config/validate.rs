@@ -92,6 +92,7 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     validate_vision(c)?;
     validate_daemon(c)?;
     validate_acquisition(c)?;
+    validate_world(c)?;
     validate_road_sigma(c)?;
     validate_start_gate(c)?;
 
@@ -484,6 +485,35 @@ fn validate_road_sigma(c: &Config) -> Result<(), ConfigError> {
         Some(s) => non_negative("filter.road_sigma_m", s),
         None => Ok(()),
     }
+}
+
+fn validate_world(c: &Config) -> Result<(), ConfigError> {
+    let Some(w) = &c.world else {
+        return Ok(());
+    };
+    let o = &w.origin;
+    if !(o.lat_deg.is_finite() && (-90.0..=90.0).contains(&o.lat_deg)) {
+        return Err(invalid(
+            "world.origin.lat_deg",
+            o.lat_deg,
+            "must be -90..90 degrees",
+        ));
+    }
+    if !(o.lon_deg.is_finite() && (-180.0..=180.0).contains(&o.lon_deg)) {
+        return Err(invalid(
+            "world.origin.lon_deg",
+            o.lon_deg,
+            "must be -180..180 degrees",
+        ));
+    }
+    if !(o.alt_m.is_finite() && (-1000.0..=10_000.0).contains(&o.alt_m)) {
+        return Err(invalid(
+            "world.origin.alt_m",
+            o.alt_m,
+            "must be -1000..10000 m (height above the WGS84 ellipsoid)",
+        ));
+    }
+    positive("world.origin_tolerance_m", w.origin_tolerance_m)
 }
 
 fn validate_acquisition(c: &Config) -> Result<(), ConfigError> {

@@ -95,6 +95,34 @@ pub enum DaemonError {
          ({0}) has none: use daemon.engage = \"auto\" or a real vehicle (or a mock-autopilot a test drives)"
     )]
     PilotNeedsVehicle(String),
+    /// `[world]` is set and the vehicle's origin cannot be checked against it.
+    #[error(
+        "world.origin: the vehicle reported no GPS_GLOBAL_ORIGIN within {0} s (no GPS fix or \
+         no estimator origin yet?); infotrack flies a world on Earth only when it knows where \
+         the vehicle's local frame is"
+    )]
+    NoVehicleOrigin(f64),
+    /// The vehicle's origin is too far from the world's.
+    #[error(
+        "world.origin: the vehicle's local origin ({vehicle_lat:.7}, {vehicle_lon:.7}) is \
+         {distance_m:.1} m from the world's ({world_lat:.7}, {world_lon:.7}), more than \
+         world.origin_tolerance_m = {tolerance_m} m: the roads, occlusions and geofence would \
+         be that far off. Power the vehicle up (or set its EKF origin) at the world's origin"
+    )]
+    OriginTooFar {
+        /// The vehicle's origin.
+        vehicle_lat: f64,
+        /// The vehicle's origin.
+        vehicle_lon: f64,
+        /// The world's origin.
+        world_lat: f64,
+        /// The world's origin.
+        world_lon: f64,
+        /// Between them, m.
+        distance_m: f64,
+        /// The tolerance, m.
+        tolerance_m: f64,
+    },
     /// The simulated-clock runtime could not be built.
     #[error("cannot build the simulated-clock runtime: {0}")]
     Runtime(std::io::Error),
@@ -342,6 +370,13 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
     let (pipeline, channels) = start_pipeline(cfg, opts).await?;
     let mut signal = shutdown_signal();
     let vehicle = connect(cfg, opts, &mut signal).await?;
+    if let Some(w) = &cfg.world {
+        if let Err(e) = check_world_origin(w, &vehicle.link, cfg.daemon.connect_timeout_s).await {
+            pipeline.shared.stop.store(true, Ordering::Relaxed);
+            vehicle.link.flush_tlog();
+            return Err(e);
+        }
+    }
     let pilot = cfg.daemon.engage == Engage::Pilot;
     let launched: Result<(), DaemonError> = tokio::select! {
         r = launch(cfg, &vehicle.link) => r.map_err(DaemonError::from),
@@ -487,6 +522,43 @@ async fn connect(
         url,
         mock,
     })
+}
+
+/// `[world]`: the vehicle's local origin (GPS_GLOBAL_ORIGIN, asked for once) must be the
+/// world's, within the tolerance, before anything is commanded.
+async fn check_world_origin(
+    w: &crate::config::WorldConfig,
+    link: &VehicleLink,
+    timeout_s: f64,
+) -> Result<(), DaemonError> {
+    const GPS_GLOBAL_ORIGIN_ID: u32 = 49;
+    if let Err(e) = link.request_message(GPS_GLOBAL_ORIGIN_ID).await {
+        // Some firmware streams it without answering the request: wait for it anyway.
+        tracing::warn!("asking for GPS_GLOBAL_ORIGIN: {e}");
+    }
+    let until = Instant::now() + Duration::from_secs_f64(timeout_s);
+    let origin = loop {
+        if let Some(o) = link.state().global_origin {
+            break o;
+        }
+        if Instant::now() > until {
+            return Err(DaemonError::NoVehicleOrigin(timeout_s));
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    let distance_m = w.origin.horizontal_distance_m(&origin);
+    if distance_m > w.origin_tolerance_m {
+        return Err(DaemonError::OriginTooFar {
+            vehicle_lat: origin.lat_deg,
+            vehicle_lon: origin.lon_deg,
+            world_lat: w.origin.lat_deg,
+            world_lon: w.origin.lon_deg,
+            distance_m,
+            tolerance_m: w.origin_tolerance_m,
+        });
+    }
+    tracing::info!("the vehicle's origin is {distance_m:.2} m from the world's");
+    Ok(())
 }
 
 /// Phase 3: telemetry, then the takeoff: infotrack's own (`auto`) or the pilot's.
