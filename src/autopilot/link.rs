@@ -1187,8 +1187,12 @@ fn on_message(
             let mode = Mode::from_custom_mode(flavor, hb.custom_mode);
             if let Some(old) = s.mode {
                 if old != mode {
+                    // A command explains one change: a later return to the same mode by
+                    // the vehicle itself (PX4 back to OFFBOARD after a failsafe) is its own.
                     let commanded = s.commanded_mode == Some(mode);
-                    if !commanded {
+                    if commanded {
+                        s.commanded_mode = None;
+                    } else {
                         tracing::warn!(
                             "vehicle changed mode {old:?} -> {mode:?} by itself (failsafe?)"
                         );
