@@ -74,6 +74,28 @@ pub struct DmmnTimes {
     pub eer_rollout_nh500_ms: f64,
 }
 
+/// This core's single-thread f32 matrix-multiply rate on the DMMN's own feed-forward shapes
+/// at batch 500 (500 x 10 tokens of width 5, a hidden layer of 50): [5000 x 5] x [5 x 50]
+/// then [5000 x 50] x [50 x 5], with nalgebra (the `matrixmultiply` kernels), GFLOP/s. The
+/// model's FLOP count per batch comes from `training/count_flops.py`; the two together say
+/// how close an inference is to what this machine can do (BENCHMARKS.md).
+pub fn gemm_gflops(repetitions: usize) -> f64 {
+    use nalgebra::DMatrix;
+    let (tokens, width, hidden) = (5000, 5, 50);
+    let x = DMatrix::<f32>::from_fn(tokens, width, |i, j| ((i * 7 + j) % 13) as f32 * 0.1);
+    let w1 = DMatrix::<f32>::from_fn(width, hidden, |i, j| ((i + 3 * j) % 5) as f32 * 0.2);
+    let w2 = DMatrix::<f32>::from_fn(hidden, width, |i, j| ((2 * i + j) % 7) as f32 * 0.1);
+    let mut h = DMatrix::<f32>::zeros(tokens, hidden);
+    let mut y = DMatrix::<f32>::zeros(tokens, width);
+    let ms = time_median(repetitions.min(200), || {
+        x.mul_to(&w1, &mut h);
+        h.mul_to(&w2, &mut y);
+        std::hint::black_box(&y);
+    });
+    let flop = 2.0 * (tokens * width * hidden) as f64 * 2.0;
+    flop / (ms * 1e-3) / 1e9
+}
+
 /// What `infotrack bench` measures.
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
@@ -91,6 +113,8 @@ pub struct BenchReport {
     pub dmmn: Option<DmmnTimes>,
     /// Why the learned model's timings are missing, if they are.
     pub dmmn_skipped: Option<String>,
+    /// Single-thread GEMM rate on the DMMN's shapes, GFLOP/s ([`gemm_gflops`]).
+    pub gemm_gflops: f64,
 }
 
 /// Times the DMMN at `model_path`.
@@ -172,6 +196,7 @@ pub fn run(repetitions: usize, seed: u64, model: &std::path::Path) -> BenchRepor
         repetitions,
         dmmn: None,
         dmmn_skipped: None,
+        gemm_gflops: gemm_gflops(repetitions),
     }
     .with_dmmn(run_dmmn(model, repetitions, seed))
 }
@@ -253,5 +278,9 @@ pub fn render(r: &BenchReport) -> String {
         (None, Some(why)) => s += &format!("DMMN rows skipped: {why}\n"),
         (None, None) => {}
     }
+    s += &format!(
+        "f32 GEMM on the DMMN's feed-forward shapes at batch 500, one thread: {:.2} GFLOP/s\n",
+        r.gemm_gflops
+    );
     s
 }
