@@ -9,7 +9,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::{eventually, sigterm, udp_mock};
+use common::{eventually, lab_config_with, sigterm, udp_mock};
 use infotrack::autopilot::modes::{Flavor, Mode};
 use infotrack::mock::server::MockHandle;
 use infotrack::mock::MockConfig;
@@ -21,17 +21,31 @@ fn root() -> PathBuf {
 
 /// The lab config with `daemon.engage = "pilot"`.
 fn pilot_config(dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(root().join("config/default.toml")).unwrap();
-    let mut table: toml::Table = text.parse().unwrap();
-    table
-        .entry("daemon")
-        .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-        .as_table_mut()
-        .unwrap()
-        .insert("engage".into(), toml::Value::String("pilot".into()));
-    let path = dir.join("pilot.toml");
-    std::fs::write(&path, toml::to_string(&table).unwrap()).unwrap();
-    path
+    lab_config_with(dir, "daemon.engage", toml::Value::String("pilot".into()))
+}
+
+/// `infotrack run` on `cfg` against the mock at `port`, until SIGTERM (`--duration 0`).
+fn run_until_stopped(cfg: &Path, port: u16, out: Option<&Path>) -> tokio::process::Child {
+    let mut c = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"));
+    c.args([
+        "run",
+        "--quiet",
+        "--duration",
+        "0",
+        "--motion",
+        "cv",
+        "--config",
+    ])
+    .arg(cfg)
+    .arg("--vehicle")
+    .arg(format!("udpout:127.0.0.1:{port}"))
+    .current_dir(root())
+    .stdout(std::process::Stdio::piped())
+    .stderr(std::process::Stdio::piped());
+    if let Some(dir) = out {
+        c.arg("--out").arg(dir);
+    }
+    c.spawn().unwrap()
 }
 
 /// The pilot flips the switch to `mode`, retrying for up to 5 s (PX4 refuses OFFBOARD
@@ -70,26 +84,8 @@ async fn pilot_hands_over_and_takes_back(flavor: Flavor) {
     let companion = Mode::companion_for(flavor);
     let (mock, port) = udp_mock(MockConfig::new(flavor)).await;
     let dir = tempfile::tempdir().unwrap();
-    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
-        .args([
-            "run",
-            "--quiet",
-            "--duration",
-            "0",
-            "--motion",
-            "cv",
-            "--config",
-        ])
-        .arg(pilot_config(dir.path()))
-        .arg("--vehicle")
-        .arg(format!("udpout:127.0.0.1:{port}"))
-        .arg("--out")
-        .arg(dir.path().join("flight"))
-        .current_dir(root())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let flight = dir.path().join("flight");
+    let child = run_until_stopped(&pilot_config(dir.path()), port, Some(&flight));
 
     // On the ground: infotrack never arms, never changes the mode, sends no setpoint.
     let initial = mock.with(|m| m.mode());
@@ -181,23 +177,7 @@ async fn engaged_at_the_stop_it_holds_and_the_in_process_mock_is_refused() {
     let (mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
     let dir = tempfile::tempdir().unwrap();
     let cfg = pilot_config(dir.path());
-    let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
-        .args([
-            "run",
-            "--quiet",
-            "--duration",
-            "0",
-            "--motion",
-            "cv",
-            "--config",
-        ])
-        .arg(&cfg)
-        .arg("--vehicle")
-        .arg(format!("udpout:127.0.0.1:{port}"))
-        .current_dir(root())
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = run_until_stopped(&cfg, port, None);
     tokio::time::sleep(Duration::from_secs(2)).await;
     mock.with(|m| m.pilot_take_off(1.2));
     assert!(eventually(15.0, || mock.with(|m| -m.position_ned_m()[2] > 1.0)).await);

@@ -10,13 +10,13 @@ mod common;
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use common::{free_udp_port, udp_mock};
+use common::{free_udp_port, lab_config_with, output_text, udp_mock};
 use infotrack::autopilot::modes::Flavor;
 use infotrack::mock::MockConfig;
 use mavlink::dialects::ardupilotmega::*;
@@ -25,32 +25,6 @@ use tokio::net::UdpSocket;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// The lab config with `key` (dotted, e.g. `filter.particles`) set to `value`, written into
-/// `dir`.
-fn lab_config_with(dir: &Path, key: &str, value: toml::Value) -> PathBuf {
-    let text = std::fs::read_to_string(root().join("config/default.toml")).unwrap();
-    let mut table: toml::Table = text.parse().unwrap();
-    let (section, name) = key.split_once('.').unwrap();
-    table
-        .entry(section)
-        .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-        .as_table_mut()
-        .unwrap()
-        .insert(name.to_string(), value);
-    let path = dir.join(format!("{}.toml", key.replace('.', "-")));
-    std::fs::write(&path, toml::to_string(&table).unwrap()).unwrap();
-    path
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "rc {:?}\nstdout:\n{}\nstderr:\n{}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
 }
 
 /// Rows "values that abort the process": each size or rate beyond its bound is refused at
@@ -75,7 +49,7 @@ fn sizes_and_rates_beyond_their_bounds_are_refused_naming_the_key() {
             .current_dir(root())
             .output()
             .unwrap();
-        let all = text(&out);
+        let all = output_text(&out);
         assert_eq!(out.status.code(), Some(1), "{key}: {all}");
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(stderr.contains(key), "{key} is named: {all}");
@@ -219,7 +193,7 @@ async fn a_second_vehicle_and_nan_poses_on_the_wire_are_refused() {
         .output()
         .await
         .unwrap();
-    let all = text(&out);
+    let all = output_text(&out);
     assert!(out.status.success(), "{all}");
     assert!(
         relay.injected.load(Ordering::Relaxed),
@@ -324,7 +298,7 @@ async fn a_full_disk_is_said_to_the_log_and_the_gcs_and_the_flight_goes_on() {
         });
     }
     let out = cmd.output().await.unwrap();
-    let all = text(&out);
+    let all = output_text(&out);
     assert!(out.status.success(), "the flight ends normally: {all}");
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("stopped by Duration"), "{all}");
@@ -402,7 +376,7 @@ fn a_signing_mismatch_is_named_both_ways() {
         c.output().unwrap()
     };
     let unsigned = fly(None);
-    let all = text(&unsigned);
+    let all = output_text(&unsigned);
     assert!(!unsigned.status.success(), "{all}");
     assert!(
         all.contains("signing mismatch: the vehicle signs its messages")
@@ -415,7 +389,7 @@ fn a_signing_mismatch_is_named_both_ways() {
         toml::Value::String(other_key.display().to_string()),
     );
     let wrong = fly(Some(cfg));
-    let all = text(&wrong);
+    let all = output_text(&wrong);
     assert!(!wrong.status.success(), "{all}");
     assert!(
         all.contains("no autopilot heartbeat")
@@ -492,7 +466,7 @@ async fn a_pipeline_that_dies_in_flight_leaves_the_vehicle_in_hold() {
             .output()
             .await
             .unwrap();
-        let all = text(&out);
+        let all = output_text(&out);
         assert!(!out.status.success(), "{flavor:?}: {all}");
         assert!(
             all.contains("the pipeline thread died with a panic (the vehicle was put in hold)"),

@@ -3,7 +3,11 @@
 //! as the dedicated user with the journal-friendly logging, and a flight on the mock leaves
 //! its logs in a per-flight folder under the installed log directory.
 
+mod common;
+
 use std::path::PathBuf;
+
+use common::output_text;
 use std::process::Command;
 
 #[test]
@@ -19,11 +23,7 @@ fn install_into_a_destdir_gives_a_program_that_flies_the_mock_and_keeps_its_logs
         .arg(env!("CARGO_BIN_EXE_infotrack"))
         .output()
         .unwrap();
-    let said = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let said = output_text(&out);
     assert!(out.status.success(), "{said}");
     let lib = d.join("usr/local/lib/infotrack");
     assert!(lib.join("infotrack").is_file());
@@ -66,11 +66,7 @@ fn install_into_a_destdir_gives_a_program_that_flies_the_mock_and_keeps_its_logs
         .current_dir(d.join("etc/infotrack"))
         .output()
         .unwrap();
-    let said = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let said = output_text(&run);
     assert!(run.status.success(), "{said}");
     assert!(
         said.contains(&format!(

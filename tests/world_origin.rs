@@ -6,19 +6,15 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::udp_mock;
+use common::{lab_config_with, udp_mock};
 use infotrack::autopilot::modes::Flavor;
 use infotrack::mock::MockConfig;
 
 fn lab_with_world(dir: &Path, lat: f64, lon: f64) -> PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut text = std::fs::read_to_string(root.join("config/default.toml")).unwrap();
-    text.push_str(&format!(
-        "\n[world]\norigin = {{ lat_deg = {lat}, lon_deg = {lon}, alt_m = 30.0 }}\n"
-    ));
-    let p = dir.join(format!("world-{lat}-{lon}.toml"));
-    std::fs::write(&p, text).unwrap();
-    p
+    let origin: toml::Table = format!("lat_deg = {lat}\nlon_deg = {lon}\nalt_m = 30.0")
+        .parse()
+        .unwrap();
+    lab_config_with(dir, "world.origin", toml::Value::Table(origin))
 }
 
 async fn fly(cfg: &Path, port: u16) -> std::process::Output {

@@ -102,3 +102,31 @@ pub async fn sigterm(child: tokio::process::Child) -> std::process::Output {
         .expect("the process did not stop on SIGTERM")
         .unwrap()
 }
+
+/// The lab config (`config/default.toml`) with `key` (dotted, `section.name`) set to
+/// `value`, written into `dir`.
+pub fn lab_config_with(dir: &std::path::Path, key: &str, value: toml::Value) -> std::path::PathBuf {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("config/default.toml")).unwrap();
+    let mut table: toml::Table = text.parse().unwrap();
+    let (section, name) = key.split_once('.').unwrap();
+    table
+        .entry(section)
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+        .as_table_mut()
+        .unwrap()
+        .insert(name.to_string(), value);
+    let path = dir.join(format!("{}.toml", key.replace('.', "-")));
+    std::fs::write(&path, toml::to_string(&table).unwrap()).unwrap();
+    path
+}
+
+/// A finished process's exit code, stdout and stderr, for assertions and their messages.
+pub fn output_text(o: &std::process::Output) -> String {
+    format!(
+        "rc {:?}\nstdout:\n{}\nstderr:\n{}",
+        o.status.code(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
