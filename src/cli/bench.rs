@@ -262,14 +262,14 @@ pub fn render(r: &BenchReport) -> String {
                 d.model, d.parameters
             );
             for (what, v, target) in [
-                ("DMMN inference, batch 500", d.infer_batch500_ms, "-"),
+                ("DMMN inference, batch 500", d.infer_batch500_ms, "<= 0.3"),
                 ("DMMN inference, batch 25", d.infer_batch25_ms, "-"),
                 ("DMMN inference, batch 1", d.infer_batch1_ms, "-"),
-                ("PF step, N = 500, DMMN", d.pf_step_n500_ms, "<= 1"),
+                ("PF step, N = 500, DMMN", d.pf_step_n500_ms, "<= 0.5"),
                 (
                     "EER rollout (DMMN), N_H = 500, K = 4",
                     d.eer_rollout_nh500_ms,
-                    "<= 4",
+                    "<= 2",
                 ),
             ] {
                 s += &format!("{what:<44} {v:>10.4} {target:>12}\n");

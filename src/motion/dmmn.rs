@@ -293,6 +293,19 @@ impl Dmmn {
 
     /// Predicts for raw f32 histories `[n, K_in, 2]`; for tests and benchmarks.
     pub fn predict_raw(&mut self, histories: &[f32], n: usize) -> Result<Vec<f32>, MotionError> {
+        let mut out = Vec::with_capacity(2 * n);
+        self.run(histories, n, |data| out.extend_from_slice(data))?;
+        Ok(out)
+    }
+
+    /// Runs the model on `[n, K_in, 2]` histories (read in place, no copy) and hands the
+    /// `[n, 2]` output to `take` straight from ONNX Runtime's buffer (no copy either).
+    fn run(
+        &mut self,
+        histories: &[f32],
+        n: usize,
+        take: impl FnOnce(&[f32]),
+    ) -> Result<(), MotionError> {
         let input = TensorRef::from_array_view(([n, self.k_in, 2], histories))
             .map_err(|e| err(format!("cannot build the input tensor: {e}")))?;
         let outputs = self
@@ -307,7 +320,8 @@ impl Dmmn {
                 "output has shape {shape:?}, expected [{n}, 2]"
             )));
         }
-        Ok(data.to_vec())
+        take(data);
+        Ok(())
     }
 }
 
@@ -382,13 +396,13 @@ impl MotionModel for Dmmn {
         let mut input = std::mem::take(&mut self.input);
         input.clear();
         input.extend(histories.as_slice().iter().map(|v| *v as f32));
-        let result = self.predict_raw(&input, n);
+        let result = self.run(&input, n, |data| {
+            // Non-finite outputs are passed on: the filter rejects and counts them.
+            for (o, xy) in out.iter_mut().zip(data.chunks_exact(2)) {
+                *o = Enu2::new(xy[0] as f64, xy[1] as f64);
+            }
+        });
         self.input = input;
-        let data = result?;
-        // Non-finite outputs are passed on: the filter rejects and counts them.
-        for (o, xy) in out.iter_mut().zip(data.chunks_exact(2)) {
-            *o = Enu2::new(xy[0] as f64, xy[1] as f64);
-        }
-        Ok(())
+        result
     }
 }
