@@ -231,7 +231,31 @@ mod cli;
 
 use cli::{calibrate, detect, run_cmd};
 
+/// Keeps freed heap memory in the process instead of handing it back to the kernel after
+/// every frame. The renderer and the AprilTag detector allocate and free ~10 MB of image
+/// buffers per frame; glibc's defaults return them (munmap, or trimming a thread's arena)
+/// and the next frame faults every page in again, zeroed: ~2,500 page faults per frame,
+/// a fifth of the simulated-clock closed loop's CPU time (issue 16, BENCHMARKS.md). The
+/// cost is that the resident size stays at its peak, which a daemon reaches in its first
+/// frames anyway. Only the allocator's thresholds change; what is computed is identical.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn keep_freed_memory() {
+    // glibc's largest accepted mmap threshold (HEAP_MAX_SIZE / 2 on 64-bit).
+    const MMAP_THRESHOLD_B: libc::c_int = 32 << 20;
+    const TRIM_THRESHOLD_B: libc::c_int = 256 << 20;
+    // SAFETY: mallopt only sets allocator parameters; it is called before any other
+    // thread exists. A refusal (return 0) leaves glibc's defaults, which are correct too.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD_B);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, TRIM_THRESHOLD_B);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn keep_freed_memory() {}
+
 fn main() -> ExitCode {
+    keep_freed_memory();
     let cli = Cli::parse();
     let (filter, origin) = match &cli.log {
         Some(f) => (f.clone(), "--log"),

@@ -5,9 +5,9 @@
 //!
 //! Re-recorded once on purpose, by `scripts/record-golden.py`: when the DMMN files became
 //! the batch-last graph (issue 16), whose outputs differ from the old graph's by float32
-//! rounding (< 1e-6 m). The CV and KF rows did not move; the DMMN rows moved by at most
-//! 1e-7 in the closed loop and 0.024 m in the Monte Carlo, where a rounding-level
-//! difference flips one EER decision and the run goes another way.
+//! rounding (< 1e-6 m). The CV and KF rows did not move; the DMMN rows' errors moved by at
+//! most 0.024 m, where a rounding-level difference flips one EER decision and the run goes
+//! another way (most moved by under 1e-6).
 
 use std::path::Path;
 use std::process::Command;

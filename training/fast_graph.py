@@ -8,8 +8,13 @@ Runtime spends its time in per-row loops instead of arithmetic (issue 16: 3.2 ms
 of 500 where the arithmetic needs ~0.15 ms). Here every tensor keeps the batch as its last,
 contiguous axis: positions are `[d, K, B]`, attention weights `[heads, K, K, B]`, linear
 layers are one GEMM over `[d, K*B]`, LayerNorm and softmax reduce over a leading axis. The
-graph's interface is unchanged: `history` [batch, K_in, 2] in, `next` [batch, 2] out (one
-transpose at each end).
+graph's interface is unchanged: `history` [batch, K_in, 2] in, `next` [batch, 2] out; the
+first GEMM (input normalisation, embedding and positions as one affine map) reads the
+batch-first input and the head's GEMM writes batch-first output, so there is no transpose.
+Fewer nodes matter as much as layout (each costs ~1-3 us of dispatch at this size): LayerNorm's
+eps is a GEMM bias, softmax's max subtraction is dropped when the weights bound the logits
+(`logit_bound`), its normalisation multiplies the weighted sum rather than the weights, and a
+causal mask's all-zero last row is not added.
 
     python training/fast_graph.py models/dmmn.onnx        # rewrite a shipped model in place
 
@@ -50,6 +55,52 @@ def plain_linear(lin: nn.Linear) -> tuple[torch.Tensor, torch.Tensor]:
     return lin.weight.detach().clone(), lin.bias.detach().clone()[:, None]
 
 
+# exp(60) = 1.1e26: ten of them sum far below float32's 3.4e38, and exp(-60) = 8.8e-27 is a
+# normal float32. Within +-60 the softmax needs no max subtraction.
+SAFE_LOGIT = 60.0
+
+
+def logit_bound(blk) -> float:
+    """An upper bound on |q . k| * scale in block `blk`'s attention, from its weights alone.
+    LayerNorm's output n (before gain and shift) has |n| <= sqrt(d); with the gain and shift
+    folded in, each q or k coordinate is w . n + b, so |q_c| <= |w|_2 sqrt(d) + |b|, and a
+    head's logit is bounded by the product of its q and k bounds."""
+    w, b = folded_linear(blk.ln1, blk.sa.qkv)
+    d = w.shape[1]
+    coord = (w.norm(dim=1) * d ** 0.5 + b[:, 0].abs()).reshape(3, blk.sa.heads, blk.sa.head_size)
+    q, k = coord[0], coord[1]
+    return float(((q * k).sum(1)).max() * abs(float(blk.sa.scale)))
+
+
+def embedding_affine(m: Dmmn) -> tuple[torch.Tensor, torch.Tensor]:
+    """`m`'s input normalisation, embedding and learned positions as one affine map of the
+    flattened history: [K*2] -> [d*K] rows ordered (feature, time step), so that the result
+    reshapes to [d, K, B] for free. Every step of it is affine in the input (the "last"
+    normalisation subtracts a linear function of the input too), so the map is read off
+    exactly by evaluating it at 0 and at the unit vectors, in float64. Returns (A [d*K, K*2],
+    c [d*K, 1])."""
+    k, d = int(m.pos.numel()), int(m.embed.weight.shape[0])
+    w = m.embed.weight.detach().double()
+    table = (m.embed.bias[:, None] + m.position_embedding_table.weight.t()).detach().double()  # [d, K]
+    # Per-axis ([2]) or one number: either broadcasts over [K, 2] as a row.
+    center, scale, step = (t.detach().double().reshape(1, -1) for t in (m.center, m.scale, m.step_scale))
+
+    def f(x):  # [K, 2] -> [d*K]
+        if m.input_norm == "none":
+            h = x
+        elif m.input_norm == "workspace":
+            h = (x - center) / scale
+        elif m.input_norm == "last":
+            h = (x - x[k - 1 : k, :]) / step
+        else:
+            raise ValueError(m.input_norm)
+        return ((w @ h.t()) + table).reshape(-1)  # [d, K] -> (feature, step) order
+
+    base = f(torch.zeros(k, 2, dtype=torch.float64))
+    cols = [f(torch.eye(2 * k, dtype=torch.float64)[j].reshape(k, 2)) - base for j in range(2 * k)]
+    return torch.stack(cols, 1).float(), base.float()[:, None]
+
+
 class DmmnBatchLast(nn.Module):
     """`Dmmn`'s forward pass with the batch as the last axis of every tensor, for inference.
     Built from a trained model (eval mode: no dropout); its weights are copied once, with
@@ -73,9 +124,11 @@ class DmmnBatchLast(nn.Module):
         buf("center", m.center.detach().clone().reshape(2, 1, 1))
         buf("scale", m.scale.detach().clone())
         buf("step_scale", m.step_scale.detach().clone())
-        buf("embed_w", m.embed.weight.detach().clone())
-        # The embedding's bias and the learned positions, one [d, K, 1] table.
-        buf("embed_b", (m.embed.bias[:, None] + m.position_embedding_table.weight.t()).detach().clone().reshape(d, k, 1))
+        # Input normalisation, embedding and positions are one affine map of the flattened
+        # history [K*2] -> [d*K]: one Gemm reads the batch-first input and writes batch-last.
+        a, c = embedding_affine(m)
+        buf("embed_a", a)
+        buf("embed_c", c)
         # LayerNorm's mean and variance over the d features as matrix products: ONNX Runtime
         # runs them as GEMMs over the long axis instead of reductions over a short one.
         buf("centring", torch.eye(d) - torch.full((d, d), 1.0 / d))
@@ -90,6 +143,8 @@ class DmmnBatchLast(nn.Module):
                 buf(f"b{i}_{name}_w", w)
                 buf(f"b{i}_{name}_b", b)
             buf(f"b{i}_mask", blk.sa.mask.detach().clone())
+        self.safe_logits = [logit_bound(blk) < SAFE_LOGIT for blk in m.blocks]
+        self.last_row_masked = [bool((blk.sa.mask[-1] != 0).any()) for blk in m.blocks]
         hw, hb = folded_linear(m.ln_f, m.lm_head)
         buf("head_w", hw)
         buf("head_b", hb)
@@ -102,9 +157,14 @@ class DmmnBatchLast(nn.Module):
         """LayerNorm's normalisation (gain and shift are folded into the next layer) over
         axis 0 of [d, N], the features."""
         c = self.centring @ h
-        var = self.mean_row @ (c * c)
-        # One reciprocal per column and a multiply: a divide over [d, N] costs more.
-        return c * torch.reciprocal(torch.sqrt(var + eps))
+        # eps as the Gemm's bias; one reciprocal per column and a multiply (a divide over
+        # [d, N] costs more, and Pow(-0.5) more than Sqrt and Reciprocal).
+        var_eps = torch.addmm(self.eps_bias(eps), self.mean_row, c * c)
+        return c * torch.reciprocal(torch.sqrt(var_eps))
+
+    def eps_bias(self, eps: float) -> torch.Tensor:
+        """eps as a [1, 1] tensor (a Gemm bias)."""
+        return torch.full((1, 1), eps)
 
     def attention(self, i: int, h: torch.Tensor, last_only: bool) -> torch.Tensor:
         """Block i's attention on its LayerNorm of h: [d, K*B] -> [d, Kq*B] (Kq = 1 when
@@ -125,15 +185,20 @@ class DmmnBatchLast(nn.Module):
             w = (q.reshape(hh, hs, kq, 1, -1) * kk.reshape(hh, hs, 1, k, -1)).sum(1)
         if self.scales[i] != 1.0:
             w = w * self.scales[i]
-        w = w + mask.reshape(1, kq, k, 1)
+        if not last_only or self.last_row_masked[i]:  # a causal mask's last row is all zeros
+            w = w + mask.reshape(1, kq, k, 1)
         # Softmax over the keys (axis 2), written out: ONNX Runtime's Softmax on a
-        # non-last axis transposes the whole tensor twice.
-        w = torch.exp(w - w.amax(2, keepdim=True))
-        w = w * torch.reciprocal(w.sum(2, keepdim=True))
+        # non-last axis transposes the whole tensor twice. The usual max subtraction only
+        # guards exp against overflow; it is left out when the weights bound every logit
+        # well inside float32's range (see logit_bound).
+        e = torch.exp(w if self.safe_logits[i] else w - w.amax(2, keepdim=True))
+        # sum_j e_j v_j / sum_j e_j: the normalising multiply runs on the [H, Kq, B] result,
+        # not on the [H, Kq, K, B] weights.
+        inv = torch.reciprocal(e.sum(2))
         if hs == 1:
-            y = (w * v.reshape(hh, 1, k, -1)).sum(2)  # [H, Kq, B]
+            y = (e * v.reshape(hh, 1, k, -1)).sum(2) * inv  # [H, Kq, B]
         else:
-            y = (w.reshape(hh, 1, kq, k, -1) * v.reshape(hh, hs, 1, k, -1)).sum(3)  # [H, hs, Kq, B]
+            y = (e.reshape(hh, 1, kq, k, -1) * v.reshape(hh, hs, 1, k, -1)).sum(3) * inv.reshape(hh, 1, kq, -1)
         return self.linear(f"b{i}_proj", y.reshape(hh * hs, -1))
 
     def block(self, i: int, h: torch.Tensor, last_only: bool) -> torch.Tensor:
@@ -146,25 +211,18 @@ class DmmnBatchLast(nn.Module):
 
     def forward(self, x):
         d, k = self.d, self.k
-        xt = x.permute(2, 1, 0)  # [2, K, B]
-        last = xt[:, k - 1, :]  # [2, B]
-        if self.input_norm == "none":
-            h = xt
-        elif self.input_norm == "workspace":
-            h = (xt - self.center) / self.scale
-        elif self.input_norm == "last":
-            h = (xt - last.reshape(2, 1, -1)) / self.step_scale
-        else:
-            raise ValueError(self.input_norm)
-        h = ((self.embed_w @ h.reshape(2, -1)).reshape(d, k, -1) + self.embed_b).reshape(d, -1)
+        # [d*K, B] = A [d*K, K*2] . x^T + c: the transpose is the Gemm's transB.
+        h = torch.addmm(self.embed_c, self.embed_a, x.reshape(-1, 2 * k).t()).reshape(d, -1)
         for i in range(self.blocks_n):
             h = self.block(i, h, last_only=(i == self.blocks_n - 1))
-        out = self.linear("head", self.normalize(h, self.eps[-1]))  # [2, B]
+        n = self.normalize(h, self.eps[-1])  # [d, B]
+        # The head writes batch-first [B, 2] (transA), so no transpose at the end either.
+        out = torch.addmm(self.head_b.t(), n.t(), self.head_w.t())
         if self.output == "displacement":
-            out = last + out * self.step_scale
+            out = x[:, k - 1, :] + out * self.step_scale
         elif self.input_norm == "workspace":
-            out = out * self.scale + self.center.reshape(2, 1)
-        return out.t()
+            out = out * self.scale + self.center.reshape(1, 2)
+        return out
 
 
 def export_batch_last(model: Dmmn, path: Path, example: np.ndarray) -> None:
