@@ -99,7 +99,8 @@ pub fn wrap_angle(a: f64) -> f64 {
 /// The vehicle's pose in local NED at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct VehiclePoseNed {
-    /// Position, local NED, m (z negative above the ground).
+    /// Position, m, NED axes about the world's origin (z negative above the ground): the
+    /// vehicle's local NED, moved into the world when `[world] origin` places it there.
     pub position_ned_m: [f64; 3],
     /// Roll, rad (body FRD relative to NED, ZYX Euler angles as in MAVLink ATTITUDE).
     pub roll_rad: f64,

@@ -24,6 +24,7 @@ use super::params_file::{decode_wire, encode_wire, ParamType};
 use super::params_file::{mav_param_type_of, param_type_of};
 use super::signing::SigningKey;
 use crate::frames::{yaw_enu_to_ned, Enu2, PositionEnu, PositionNed};
+use crate::geodesy::WorldPlacement;
 use crate::world::geometry::BoundsEnu;
 
 /// Why a link operation failed.
@@ -281,6 +282,7 @@ fn spawn_streamer(
                 continue;
             };
             let (p, v) = target_sp.at(Instant::now(), streamer.geofence_enu.as_ref());
+            let p = world_to_vehicle_ned(streamer.placement().as_ref(), p);
             // No vehicle locked yet: a setpoint has nobody to go to.
             let Some(target) = state.lock().expect("state poisoned").address else {
                 continue;
@@ -398,7 +400,8 @@ pub struct VehicleState {
     pub mode: Option<Mode>,
     /// Armed.
     pub armed: bool,
-    /// LOCAL_POSITION_NED (position, velocity) and when it arrived.
+    /// LOCAL_POSITION_NED (position, velocity) and when it arrived, in the vehicle's own
+    /// local NED frame (`VehicleLink::local_ned_in_world` gives it in the world's).
     pub local_ned: Option<(Instant, PositionNed, [f32; 3])>,
     /// ATTITUDE roll, pitch, yaw (NED), rad, and when.
     pub attitude: Option<(Instant, [f32; 3])>,
@@ -432,10 +435,46 @@ pub struct VehicleState {
 }
 
 struct Streamer {
+    /// In the world frame's NED axes (converted to the vehicle's frame when sent).
     target_ned: Mutex<Option<StreamedTarget>>,
     paused: AtomicBool,
     /// Where a moving setpoint stops (world ENU).
     geofence_enu: Option<BoundsEnu>,
+    /// Where the vehicle's local frame lies in the world's; None: they are the same frame.
+    placement: Mutex<Option<WorldPlacement>>,
+}
+
+impl Streamer {
+    fn placement(&self) -> Option<WorldPlacement> {
+        *self.placement.lock().expect("placement poisoned")
+    }
+}
+
+/// A position in the world frame's NED axes, in the vehicle's local NED frame (the same
+/// without a placement). Heights are not converted (see [`WorldPlacement`]).
+fn world_to_vehicle_ned(placement: Option<&WorldPlacement>, p: PositionNed) -> PositionNed {
+    match placement {
+        None => p,
+        Some(pl) => horizontally(p, |en| pl.world_to_vehicle_en_m(en)),
+    }
+}
+
+/// The inverse of [`world_to_vehicle_ned`]: the vehicle's local NED in the world's axes.
+fn vehicle_to_world_ned(placement: Option<&WorldPlacement>, p: PositionNed) -> PositionNed {
+    match placement {
+        None => p,
+        Some(pl) => horizontally(p, |en| pl.vehicle_to_world_en_m(en)),
+    }
+}
+
+/// `p` with its (east, north) mapped by `f` and its height kept.
+fn horizontally(p: PositionNed, f: impl Fn([f64; 2]) -> [f64; 2]) -> PositionNed {
+    let [e, n] = f([p.y_east_m, p.x_north_m]);
+    PositionNed {
+        x_north_m: n,
+        y_east_m: e,
+        z_down_m: p.z_down_m,
+    }
 }
 
 /// The setpoint being streamed: a point moving at a constant velocity from `since` on.
@@ -530,6 +569,7 @@ impl VehicleLink {
             target_ned: Mutex::new(None),
             geofence_enu: cfg.geofence_enu,
             paused: AtomicBool::new(false),
+            placement: Mutex::new(None),
         });
 
         let me = (cfg.system_id, cfg.component_id);
@@ -932,7 +972,24 @@ impl VehicleLink {
 
     /// Current position, world ENU, if known.
     pub fn position_enu(&self) -> Option<PositionEnu> {
-        self.state().local_ned.map(|(_, p, _)| p.to_enu())
+        self.local_ned_in_world().map(|(_, p, _)| p.to_enu())
+    }
+
+    /// LOCAL_POSITION_NED (when it arrived, position, velocity) with the position in the
+    /// world frame's NED axes: the vehicle's local NED as it reports it, moved by the
+    /// placement (unchanged without one). The velocity keeps its components.
+    pub fn local_ned_in_world(&self) -> Option<(Instant, PositionNed, [f32; 3])> {
+        let placement = self.streamer.placement();
+        self.state()
+            .local_ned
+            .map(|(at, p, v)| (at, vehicle_to_world_ned(placement.as_ref(), p), v))
+    }
+
+    /// Anchors the vehicle's local frame in the world's (`[world] origin` and the vehicle's
+    /// GPS_GLOBAL_ORIGIN): from now on positions read through [`Self::position_enu`] and
+    /// [`Self::local_ned_in_world`] and every setpoint are converted between the two.
+    pub fn place_in_world(&self, placement: WorldPlacement) {
+        *self.streamer.placement.lock().expect("placement poisoned") = Some(placement);
     }
 
     /// Takes off to `altitude_m` above the origin and enters the tracking mode, as each

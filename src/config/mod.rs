@@ -7,6 +7,7 @@
 mod assemble;
 pub mod bounds;
 mod validate;
+pub mod world_file;
 
 use std::path::{Path, PathBuf};
 
@@ -97,23 +98,31 @@ pub struct Config {
 }
 
 /// Where the world is on Earth (`[world]`). The world's roads, occlusions, geofence and cue
-/// are ENU metres about `origin`; infotrack flies them in the vehicle's local frame, so it
-/// engages only when the vehicle's own origin (GPS_GLOBAL_ORIGIN) is `origin`, within
-/// `origin_tolerance_m`: a vehicle whose origin is elsewhere (powered up somewhere else)
-/// would see the whole world moved by that much.
+/// are ENU metres about `origin`. The vehicle's local frame has its own origin
+/// (GPS_GLOBAL_ORIGIN: where its estimator started, usually where it was powered up);
+/// infotrack reads it before commanding anything and converts every position and setpoint
+/// between the two frames, horizontally (heights stay above the vehicle's own origin). A
+/// vehicle without an origin, or one farther than `origin_tolerance_m` from `origin`, is
+/// refused.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WorldConfig {
     /// The world ENU frame's origin: `{ lat_deg, lon_deg, alt_m }` (WGS84, height above
     /// the ellipsoid, m).
     pub origin: crate::geodesy::GeodeticWgs84,
-    /// How far the vehicle's origin may be from `origin`, horizontally, m.
+    /// How far the vehicle's origin may be from `origin`, horizontally, m: beyond it the
+    /// vehicle is refused as implausibly far (the wrong world file?).
     #[serde(default = "default_origin_tolerance_m")]
     pub origin_tolerance_m: f64,
+    /// A GeoJSON file (WGS84, relative to the config file) with the world's roads,
+    /// occlusions, geofence and cue, instead of writing them as ENU metres; see
+    /// `config::world_file` and the README.
+    #[serde(default)]
+    pub geojson: Option<PathBuf>,
 }
 
 fn default_origin_tolerance_m() -> f64 {
-    5.0
+    1000.0
 }
 
 /// The operator's cue: where the target is when tracking starts, and how sure they are.
@@ -501,10 +510,21 @@ impl Config {
 
     /// Parses and validates TOML text; `origin` names the source in error messages.
     pub fn from_toml_str(text: &str, origin: &Path) -> Result<Self, ConfigError> {
-        let cfg: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        let parse_error = |e: toml::de::Error| ConfigError::Parse {
             path: origin.to_path_buf(),
             message: e.to_string(),
-        })?;
+        };
+        let table: toml::Table = toml::from_str(text).map_err(parse_error)?;
+        let has_world_file = table.get("world").and_then(|w| w.get("geojson")).is_some();
+        let cfg: Config = if has_world_file {
+            let mut table = table;
+            let base = origin.parent().unwrap_or(Path::new("."));
+            world_file::merge_world_file(&mut table, base, origin)?;
+            Config::deserialize(toml::Value::Table(table)).map_err(parse_error)?
+        } else {
+            // From the text, so that errors name the line.
+            toml::from_str(text).map_err(parse_error)?
+        };
         cfg.validate()?;
         Ok(cfg)
     }

@@ -106,8 +106,9 @@ pub enum DaemonError {
     #[error(
         "world.origin: the vehicle's local origin ({vehicle_lat:.7}, {vehicle_lon:.7}) is \
          {distance_m:.1} m from the world's ({world_lat:.7}, {world_lon:.7}), more than \
-         world.origin_tolerance_m = {tolerance_m} m: the roads, occlusions and geofence would \
-         be that far off. Power the vehicle up (or set its EKF origin) at the world's origin"
+         world.origin_tolerance_m = {tolerance_m} m: too far for this world (the wrong world \
+         file, or a vehicle that started its estimator elsewhere?). Within the tolerance \
+         infotrack converts between the two frames"
     )]
     OriginTooFar {
         /// The vehicle's origin.
@@ -313,9 +314,10 @@ fn shutdown_signal() -> ShutdownSignal {
     }
 }
 
+/// The vehicle's state for the pipeline, its position in the world frame's NED axes.
 fn snapshot(link: &VehicleLink) -> Option<VehicleSnapshot> {
+    let (_, p, _) = link.local_ned_in_world()?;
     let s = link.state();
-    let (_, p, _) = s.local_ned?;
     let att = s.attitude.map(|(_, a)| a).unwrap_or([0.0; 3]);
     Some(VehicleSnapshot {
         pose: VehiclePoseNed {
@@ -524,8 +526,9 @@ async fn connect(
     })
 }
 
-/// `[world]`: the vehicle's local origin (GPS_GLOBAL_ORIGIN, asked for once) must be the
-/// world's, within the tolerance, before anything is commanded.
+/// `[world]`: the vehicle's local origin (GPS_GLOBAL_ORIGIN, asked for once) must be known
+/// and within the tolerance of the world's before anything is commanded; the link then
+/// converts every position and setpoint between the vehicle's frame and the world's.
 async fn check_world_origin(
     w: &crate::config::WorldConfig,
     link: &VehicleLink,
@@ -557,7 +560,13 @@ async fn check_world_origin(
             tolerance_m: w.origin_tolerance_m,
         });
     }
-    tracing::info!("the vehicle's origin is {distance_m:.2} m from the world's");
+    let placement = crate::geodesy::WorldPlacement::new(w.origin, origin);
+    let [e, n] = placement.vehicle_origin_in_world_en_m();
+    tracing::info!(
+        "the vehicle's origin is {distance_m:.2} m from the world's ({e:.2} m east, {n:.2} m \
+         north of it): positions and setpoints are converted between the two frames"
+    );
+    link.place_in_world(placement);
     Ok(())
 }
 
@@ -625,7 +634,7 @@ async fn take_off_to_start(cfg: &Config, link: &VehicleLink) -> Result<(), LinkE
     // decides the simulated flights (and the recorded numbers of each seed).
     let until = Instant::now() + Duration::from_secs_f64(d.takeoff_timeout_s);
     loop {
-        if let Some((_, p, v)) = link.state().local_ned {
+        if let Some((_, p, v)) = link.local_ned_in_world() {
             let off = (p.x_north_m - want.x_north_m)
                 .hypot(p.y_east_m - want.y_east_m)
                 .hypot(p.z_down_m - want.z_down_m);
@@ -947,12 +956,11 @@ impl Supervisor<'_> {
     async fn put_target_on_map(&self, estimate_enu: [f64; 2]) {
         let link = &self.vehicle.link;
         let s = link.state();
-        let (Some((_, lat, lon, _)), Some(home_alt), Some((_, p, _))) =
-            (s.global, s.home_alt_amsl_m, s.local_ned)
+        let (Some((_, lat, lon, _)), Some(home_alt), Some(vehicle)) =
+            (s.global, s.home_alt_amsl_m, link.position_enu())
         else {
             return;
         };
-        let vehicle = p.to_enu();
         let here = crate::geodesy::GeodeticWgs84 {
             lat_deg: lat,
             lon_deg: lon,
