@@ -2,7 +2,8 @@
 # The SITL suite: flies infotrack against the real PX4 (SIH) and ArduCopter SITL builds in
 # ../shared/sitl (tests/sitl.rs). Prepares a runnable copy of the builds in a temporary
 # folder (PX4's command links are stored as text files there), then runs the suite. Says
-# plainly, and succeeds, when the builds are not there.
+# plainly, and succeeds, when the builds are not there. INFOTRACK_SITL_TESTS=NAME runs only the
+# tests whose names contain NAME.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 src="${INFOTRACK_SITL_SOURCE:-../shared/sitl}"
@@ -20,4 +21,4 @@ for f in "$copy"/px4/bin/px4-*; do
   if [ "$(cat "$f")" = px4 ]; then rm -f "$f"; ln -s px4 "$f"; fi
 done
 echo "SITL suite: PX4 SIH and ArduCopter from $src (copy in $copy)"
-INFOTRACK_SITL="$copy" cargo test --release --test sitl -- --ignored --test-threads=1 --nocapture
+INFOTRACK_SITL="$copy" cargo test --release --test sitl -- "${INFOTRACK_SITL_TESTS:-}" --ignored --test-threads=1 --nocapture

@@ -110,9 +110,13 @@ struct MockArgs {
     /// frames.
     #[arg(long)]
     signing_key: Option<PathBuf>,
-    /// Seed of the fault draws.
+    /// Seed of the fault draws and of the vehicle's wander.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// How the vehicle answers targets: `sitl` (as the flavour's SITL build measured:
+    /// PX4 SIH's slow, wandering loop; ArduCopter's steady one) or `ideal` (exactly).
+    #[arg(long, default_value = "sitl", value_parser = ["sitl", "ideal"])]
+    response: String,
     /// Seconds after start before arming is allowed (the estimator settling).
     #[arg(long, default_value_t = 0.0)]
     estimator_ready_after: f64,
@@ -539,6 +543,10 @@ fn mock_autopilot(a: MockArgs) -> Result<()> {
         .transpose()?;
     let mut cfg = MockConfig::new(flavor);
     cfg.estimator_ready_after_s = a.estimator_ready_after;
+    cfg.seed = a.seed;
+    if a.response == "sitl" {
+        cfg.response = infotrack::mock::vehicle::Response::sitl(flavor);
+    }
     if let Some(path) = &a.params {
         let table = infotrack::mock::params::ParamTable::defaults(flavor);
         for p in infotrack::autopilot::params_file::read(path)? {

@@ -18,6 +18,9 @@ use infotrack::autopilot::modes::Mode;
 use infotrack::autopilot::tlog;
 use mavlink::dialects::ardupilotmega::MavMessage;
 
+#[path = "common/probe.rs"]
+mod probe;
+
 /// A SITL process, stopped (SIGTERM, then kill) when dropped.
 struct Sitl {
     child: Child,
@@ -422,4 +425,71 @@ async fn arducopter_takes_the_shipped_parameter_file() {
     .await
     .unwrap();
     assert!(check.contains("GUID_TIMEOUT"), "{check}");
+}
+
+/// Flies the response probe (`tests/common/probe.rs`) against a SITL and returns what it
+/// recorded; with `INFOTRACK_RECORD_FIXTURES=DIR` also writes it as `DIR/NAME.csv` (how
+/// `tests/fixtures/sitl/` was made: `scripts/record-sitl-responses.sh`).
+async fn probe_sitl(url: &str, name: &str) -> probe::Response {
+    let mut lc = LinkConfig::new(url);
+    lc.system_id = 245;
+    // ArduCopter's TCP port opens a moment after the process starts.
+    let until = Instant::now() + Duration::from_secs(30);
+    let link = loop {
+        match VehicleLink::connect(lc.clone()).await {
+            Ok(l) => break l,
+            Err(e) if Instant::now() > until => panic!("{url}: {e}"),
+            Err(_) => tokio::time::sleep(Duration::from_millis(500)).await,
+        }
+    };
+    link.wait_vehicle(Duration::from_secs(60)).await.unwrap();
+    link.request_telemetry().await.unwrap();
+    let until = Instant::now() + Duration::from_secs(60);
+    while (link.position_enu().is_none() || link.state().attitude.is_none())
+        && Instant::now() < until
+    {
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let r = probe::fly(&link, Duration::from_secs(120)).await;
+    if let Ok(dir) = std::env::var("INFOTRACK_RECORD_FIXTURES") {
+        let free = (1..)
+            .map(|k| Path::new(&dir).join(format!("{name}-{k}.csv")))
+            .find(|p| !p.exists())
+            .unwrap();
+        std::fs::write(&free, r.to_csv()).unwrap();
+    }
+    println!("SITL probe {name}: {:?}", r.figures());
+    r
+}
+
+/// Holds a SITL's probe flight to its committed recording, unless this run is the one
+/// recording it.
+fn check_against_recording(now: &probe::Response, name: &str) {
+    if std::env::var_os("INFOTRACK_RECORD_FIXTURES").is_some() {
+        println!("SITL probe {name}: recorded (not compared: this run makes the fixture)");
+        return;
+    }
+    let flights: Vec<probe::Figures> = probe::recorded(name).iter().map(|r| r.figures()).collect();
+    probe::assert_within(
+        &format!("{name} now"),
+        &now.figures(),
+        "its recordings",
+        &flights,
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the SITL builds: run by scripts/sitl-test.sh"]
+async fn px4_sih_answers_the_probe_as_recorded() {
+    let _px4 = start("px4/start.sh", &["0"]);
+    let r = probe_sitl("udpin:127.0.0.1:14540", "px4-sih").await;
+    check_against_recording(&r, "px4-sih");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the SITL builds: run by scripts/sitl-test.sh"]
+async fn arducopter_answers_the_probe_as_recorded() {
+    let _ac = start("arducopter/start.sh", &["1", "serial0=tcp:0"]);
+    let r = probe_sitl("tcpout:127.0.0.1:5772", "arducopter").await;
+    check_against_recording(&r, "arducopter");
 }

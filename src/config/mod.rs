@@ -196,6 +196,22 @@ pub struct DaemonConfig {
     /// point: the simulated default) or `pilot` (the pilot takes off and hands over by
     /// switching to OFFBOARD/GUIDED; infotrack never arms and lets go when the mode leaves).
     pub engage: Engage,
+    /// How the in-process mock's vehicle (`mock:px4`, `mock:ardupilot`) answers targets:
+    /// `ideal` (exactly, within the agent's speed and acceleration: the paper's simulated
+    /// agent) or `sitl` (as the flavour's SITL build measured: PX4 SIH's slow loop that
+    /// wanders by ~0.2 m, ArduCopter's steady one; see BENCHMARKS.md).
+    pub mock_response: MockResponse,
+}
+
+/// How the in-process mock's vehicle answers (`daemon.mock_response`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MockResponse {
+    /// Exactly, within the agent's limits.
+    #[default]
+    Ideal,
+    /// As the flavour's SITL build did.
+    Sitl,
 }
 
 /// Who starts and hands over the flight (`daemon.engage`).
@@ -214,6 +230,7 @@ impl Default for DaemonConfig {
     fn default() -> Self {
         Self {
             vehicle: "mock:px4".into(),
+            mock_response: MockResponse::Ideal,
             camera: "synthetic".into(),
             calibration: None,
             camera_mount_rpy_rad: [0.0; 3],

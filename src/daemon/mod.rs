@@ -268,6 +268,10 @@ fn free_udp_port() -> Result<u16, DaemonError> {
 async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String), DaemonError> {
     let port = free_udp_port()?;
     let mut mc = MockConfig::new(flavor);
+    mc.seed = cfg.seed;
+    if cfg.daemon.mock_response == crate::config::MockResponse::Sitl {
+        mc.response = crate::mock::vehicle::Response::sitl(flavor);
+    }
     let a = &cfg.agent;
     mc.param_overrides = match flavor {
         Flavor::Px4 => vec![

@@ -17,9 +17,12 @@ use mavlink::dialects::ardupilotmega::*;
 use mavlink::MavHeader;
 
 use super::params::ParamTable;
-use super::vehicle::{KinematicState, Limits};
+use super::vehicle::{Command, KinematicState, Limits, Response};
 use crate::autopilot::modes::{Flavor, Mode};
 use crate::autopilot::params_file::{decode_wire, encode_wire, mav_param_type_of};
+use crate::rng::CoreRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
 
 /// How the mock is set up.
 #[derive(Debug, Clone)]
@@ -49,6 +52,12 @@ pub struct MockConfig {
     /// one at 0.5 Hz, as a real position loop hunts (PX4 SIH never came closer than 0.08 m
     /// to a setpoint nor slower than 0.08 m/s). 0: the kinematic model's exact settling.
     pub hover_wander_m: f64,
+    /// How the vehicle's position loop answers: [`Response::IDEAL`] (the default: exact,
+    /// what the tests of the protocol and the modes need) or [`Response::sitl`] (as the
+    /// flavour's SITL build measured: `infotrack mock`'s default).
+    pub response: Response,
+    /// Seed of the loop's wander.
+    pub seed: u64,
 }
 
 impl MockConfig {
@@ -66,6 +75,8 @@ impl MockConfig {
             param_overrides: Vec::new(),
             rc_throttle_centred: false,
             hover_wander_m: 0.0,
+            response: Response::IDEAL,
+            seed: 1,
         }
     }
 }
@@ -118,6 +129,13 @@ pub struct MockAutopilot {
     /// Time the kinematics were last advanced to.
     last_tick_s: f64,
     home_ned_m: [f64; 3],
+    /// When the vehicle armed (its motors' spool-up counts from here).
+    armed_at_s: f64,
+    /// Climbing out of a takeoff (until the target altitude is first reached).
+    taking_off: bool,
+    /// The position loop's wander: where the vehicle holds relative to its target, NED, m.
+    wander_ned_m: [f64; 3],
+    wander_rng: CoreRng,
     events: Vec<MockEvent>,
     /// Message sequence for STATUSTEXT ids.
     text_id: u16,
@@ -188,6 +206,10 @@ impl MockAutopilot {
             now_s,
             last_tick_s: now_s,
             home_ned_m: [0.0; 3],
+            armed_at_s: now_s,
+            taking_off: false,
+            wander_ned_m: [0.0; 3],
+            wander_rng: CoreRng::seed_from_u64(cfg.seed),
             events: Vec::new(),
             text_id: 0,
             setpoints_received: 0,
@@ -338,6 +360,55 @@ impl MockAutopilot {
             for (tk, vk) in t.iter_mut().zip(self.target_vel_ned_mps) {
                 *tk += vk * dt;
             }
+        }
+    }
+
+    /// Advances the vehicle `dt` s: motionless while the motors spool up, then toward the
+    /// target moved by the loop's wander, climbing at the takeoff rate until the target
+    /// altitude is first reached.
+    fn fly(&mut self, limits: &Limits, dt: f64) {
+        let r = self.cfg.response;
+        if self.now_s - self.armed_at_s < r.spool_up_s {
+            return;
+        }
+        self.advance_wander(dt);
+        let target = self.target_ned_m.map(|t| {
+            if self.taking_off {
+                t
+            } else {
+                [
+                    t[0] + self.wander_ned_m[0],
+                    t[1] + self.wander_ned_m[1],
+                    t[2] + self.wander_ned_m[2],
+                ]
+            }
+        });
+        if let Some(t) = self.target_ned_m {
+            if self.taking_off && self.state.pos_ned_m[2] <= 0.95 * t[2].min(-0.1) {
+                self.taking_off = false;
+            }
+        }
+        let cmd = Command {
+            target_ned_m: target,
+            feed_forward_ned_mps: self.target_vel_ned_mps,
+            taking_off: self.taking_off,
+        };
+        self.state.step(&cmd, limits, &r, dt);
+    }
+
+    /// One step of the wander's Gauss-Markov process (exact for any `dt`).
+    fn advance_wander(&mut self, dt: f64) {
+        let r = self.cfg.response;
+        let decay = (-dt / r.wander_correlation_s.max(1e-3)).exp();
+        let spread = (1.0 - decay * decay).sqrt();
+        let sd = [
+            r.wander_horizontal_m,
+            r.wander_horizontal_m,
+            r.wander_vertical_m,
+        ];
+        for (w, sd) in self.wander_ned_m.iter_mut().zip(sd) {
+            let z: f64 = StandardNormal.sample(&mut self.wander_rng);
+            *w = *w * decay + sd * spread * z;
         }
     }
 
@@ -534,6 +605,8 @@ impl MockAutopilot {
                         MAV_RESULT_TEMPORARILY_REJECTED
                     } else {
                         self.armed = true;
+                        self.armed_at_s = self.now_s;
+                        self.taking_off = true;
                         self.home_ned_m = self.state.pos_ned_m;
                         if self.mode == Mode::Offboard {
                             self.target_ned_m = self.last_setpoint.map(|(_, p)| p);
@@ -749,8 +822,7 @@ impl MockAutopilot {
                 let limits = self.limits();
                 self.advance_moving_target(dt);
                 self.descend_without_throttle();
-                self.state
-                    .step(self.target_ned_m, self.target_vel_ned_mps, &limits, dt);
+                self.fly(&limits, dt);
             }
             self.check_geofence(&mut out);
             // RTL: over home, then land; landed: disarm.
