@@ -14,10 +14,6 @@ mod common;
 #[path = "common/probe.rs"]
 mod probe;
 
-fn recorded(name: &str) -> Vec<probe::Figures> {
-    probe::recorded(name).iter().map(|r| r.figures()).collect()
-}
-
 async fn probe_mock(flavor: Flavor, seed: u64) -> probe::Response {
     let mut cfg = MockConfig::new(flavor);
     cfg.response = infotrack::mock::vehicle::Response::sitl(flavor);
@@ -60,7 +56,7 @@ async fn probe_mock_flights(flavor: Flavor) -> probe::Figures {
 async fn the_px4_mock_answers_the_probe_as_px4_sih_did() {
     let mock = probe_mock_flights(Flavor::Px4).await;
     println!("mock PX4: {mock:?}");
-    probe::assert_within("mock PX4", &mock, "PX4 SIH", &recorded("px4-sih"));
+    probe::assert_within("mock PX4", &mock, "PX4 SIH", &probe::recorded("px4-sih"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
@@ -71,7 +67,7 @@ async fn the_ardupilot_mock_answers_the_probe_as_arducopter_did() {
         "mock ArduPilot",
         &mock,
         "ArduCopter SITL",
-        &recorded("arducopter"),
+        &probe::recorded("arducopter"),
     );
 }
 
@@ -79,8 +75,8 @@ async fn the_ardupilot_mock_answers_the_probe_as_arducopter_did() {
 /// is not the recorded one (here PX4's recording against ArduCopter's).
 #[test]
 fn the_comparison_tells_the_firmwares_apart() {
-    let px4 = recorded("px4-sih");
-    let ac = recorded("arducopter");
+    let px4 = probe::recorded("px4-sih");
+    let ac = probe::recorded("arducopter");
     for f in &px4 {
         let r = std::panic::catch_unwind(|| probe::assert_within("PX4", f, "ArduCopter", &ac));
         assert!(r.is_err(), "PX4 {f:?}\nArduCopter {ac:?}");

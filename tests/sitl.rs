@@ -428,8 +428,9 @@ async fn arducopter_takes_the_shipped_parameter_file() {
 }
 
 /// Flies the response probe (`tests/common/probe.rs`) against a SITL and returns what it
-/// recorded; with `INFOTRACK_RECORD_FIXTURES=DIR` also writes it as `DIR/NAME.csv` (how
-/// `tests/fixtures/sitl/` was made: `scripts/record-sitl-responses.sh`).
+/// recorded; with `INFOTRACK_RECORD_FIXTURES=DIR` also writes it as `DIR/NAME-K.csv`, K the
+/// first free number (how `tests/fixtures/sitl/` was made:
+/// `scripts/record-sitl-responses.sh`).
 async fn probe_sitl(url: &str, name: &str) -> probe::Response {
     let mut lc = LinkConfig::new(url);
     lc.system_id = 245;
@@ -469,7 +470,7 @@ fn check_against_recording(now: &probe::Response, name: &str) {
         println!("SITL probe {name}: recorded (not compared: this run makes the fixture)");
         return;
     }
-    let flights: Vec<probe::Figures> = probe::recorded(name).iter().map(|r| r.figures()).collect();
+    let flights = probe::recorded(name);
     probe::assert_within(
         &format!("{name} now"),
         &now.figures(),

@@ -1,6 +1,8 @@
 //! The mock autopilot's kinematic multicopter, in MAVLink local NED (the frame the
 //! autopilot itself reports in).
 
+use crate::autopilot::modes::Flavor;
+
 /// Limits of the kinematic model, from the flavour's parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
@@ -54,10 +56,10 @@ pub struct Response {
 
 impl Response {
     /// The calibrated response of `flavor`'s SITL build.
-    pub fn sitl(flavor: crate::autopilot::modes::Flavor) -> Response {
+    pub fn sitl(flavor: Flavor) -> Response {
         match flavor {
-            crate::autopilot::modes::Flavor::Px4 => Response::PX4_SIH,
-            crate::autopilot::modes::Flavor::ArduPilot => Response::ARDUCOPTER_SITL,
+            Flavor::Px4 => Response::PX4_SIH,
+            Flavor::ArduPilot => Response::ARDUCOPTER_SITL,
         }
     }
 

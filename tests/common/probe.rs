@@ -391,8 +391,8 @@ pub fn assert_within(name: &str, a: &Figures, reference: &str, flights: &[Figure
     );
 }
 
-/// The recorded flights `tests/fixtures/sitl/NAME-K.csv` (K = 1, 2, ...).
-pub fn recorded(name: &str) -> Vec<Response> {
+/// The figures of the recorded flights `tests/fixtures/sitl/NAME-K.csv` (K = 1, 2, ...).
+pub fn recorded(name: &str) -> Vec<Figures> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sitl");
     let mut out = Vec::new();
     for k in 1.. {
@@ -400,7 +400,8 @@ pub fn recorded(name: &str) -> Vec<Response> {
         let Ok(text) = std::fs::read_to_string(&p) else {
             break;
         };
-        out.push(Response::from_csv(&text).unwrap_or_else(|e| panic!("{}: {e}", p.display())));
+        let flight = Response::from_csv(&text).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        out.push(flight.figures());
     }
     assert!(
         !out.is_empty(),

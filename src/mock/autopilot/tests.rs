@@ -81,17 +81,9 @@ fn stream(m: &mut MockAutopilot, t0: f64, t1: f64, sp: Option<[f32; 3]>) -> f64 
     t
 }
 
-/// A mock whose vehicle follows its targets exactly: for tests of the protocol and the
-/// modes, not of the calibrated dynamics (`tests/mock_calibration.rs` holds those).
-fn exact(flavor: Flavor) -> MockConfig {
-    let mut c = MockConfig::new(flavor);
-    c.response = crate::mock::vehicle::Response::IDEAL;
-    c
-}
-
 #[test]
 fn px4_refuses_offboard_without_setpoints_then_flies_offboard() {
-    let mut m = MockAutopilot::new(exact(Flavor::Px4), 0.0);
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::Px4), 0.0);
     assert_eq!(
         set_mode(&mut m, 0.1, Mode::Offboard),
         MavResult::MAV_RESULT_TEMPORARILY_REJECTED
@@ -169,7 +161,7 @@ fn ardupilot_position_target_during_takeoff_cancels_it() {
 
 #[test]
 fn ardupilot_takeoff_then_guided_targets() {
-    let mut m = MockAutopilot::new(exact(Flavor::ArduPilot), 0.0);
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::ArduPilot), 0.0);
     // Targets are ignored outside GUIDED.
     m.handle(0.0, &GCS, &setpoint([10.0, 0.0, -10.0]));
     set_mode(&mut m, 0.0, Mode::Guided);
@@ -439,7 +431,7 @@ fn follow_moving_target(m: &mut MockAutopilot, t0: f64, secs: f64, v_ned: [f32; 
 #[test]
 fn both_flavours_honour_the_velocity_feed_forward_of_a_moving_target() {
     for flavor in [Flavor::Px4, Flavor::ArduPilot] {
-        let mut m = MockAutopilot::new(exact(flavor), 0.0);
+        let mut m = MockAutopilot::new(MockConfig::new(flavor), 0.0);
         let t = match flavor {
             Flavor::Px4 => {
                 let t = stream(&mut m, 0.0, 1.5, Some([0.0, 0.0, -10.0]));
