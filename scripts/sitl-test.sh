@@ -13,12 +13,6 @@ if [ ! -x "$src/px4/bin/px4" ] || [ ! -x "$src/arducopter/bin/arducopter" ]; the
 fi
 copy="$(mktemp -d)"
 trap 'rm -rf "$copy"' EXIT
-cp -r "$src/." "$copy/"
-chmod -R u+w "$copy"
-# PX4's px4-* command links arrive as 3-byte files saying "px4": make them links again.
-for f in "$copy"/px4/bin/px4-*; do
-  [ "$(basename "$f")" = px4-alias.sh ] && continue
-  if [ "$(cat "$f")" = px4 ]; then rm -f "$f"; ln -s px4 "$f"; fi
-done
+bash scripts/sitl-copy.sh "$src" "$copy"
 echo "SITL suite: PX4 SIH and ArduCopter from $src (copy in $copy)"
 INFOTRACK_SITL="$copy" cargo test --release --test sitl -- "${INFOTRACK_SITL_TESTS:-}" --ignored --test-threads=1 --nocapture
