@@ -53,3 +53,16 @@ with zipfile.ZipFile(wheels[0]) as z:
 PY
   rm -rf "$tmp"
 fi
+
+# The stock MAVLink clients (MAVSDK, pymavlink, MAVProxy from PyPI) the tests fly the mock
+# with: a virtual environment in .deps/stock-clients, pinned in tests/stock_clients/requirements.txt.
+SC_DIR=.deps/stock-clients
+SC_REQ=tests/stock_clients/requirements.txt
+if ! cmp -s "$SC_REQ" "$SC_DIR/installed-requirements.txt" 2>/dev/null; then
+  echo "setup: installing the stock MAVLink clients ($SC_REQ) into $SC_DIR" >&2
+  rm -rf "$SC_DIR"
+  python3 -m venv "$SC_DIR"
+  "$SC_DIR/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
+    --only-binary=:all: -r "$SC_REQ"
+  cp "$SC_REQ" "$SC_DIR/installed-requirements.txt"
+fi

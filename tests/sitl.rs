@@ -310,10 +310,20 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
 async fn arducopter_flies_the_lab_and_brakes_after_the_flight() {
     // SERIAL0 would hold the boot until something connects; infotrack uses SERIAL1.
     let _ac = start("arducopter/start.sh", &["1", "serial0=tcp:0"]);
+    // A ground station on the autopilot's other telemetry port (SERIAL2): what it hears of
+    // infotrack crossed ArduPilot's own MAVLink routing, as on a drone whose only radio
+    // link to the GCS goes through the flight controller.
+    let heard = Arc::new(Mutex::new(Vec::<MavMessage>::new()));
+    let gcs = tokio::spawn(gcs_through_the_autopilot(
+        "tcpout:127.0.0.1:5773",
+        heard.clone(),
+    ));
     let f = tokio::task::spawn_blocking(|| fly("tcpout:127.0.0.1:5772", 60))
         .await
         .unwrap();
+    gcs.abort();
     report("ArduCopter", &f);
+    assert_gcs_heard_the_tracker(&heard.lock().unwrap());
     assert!(f.stdout.contains("ardupilot vehicle"), "{}", f.stdout);
     assert!(filter_steps(&f) >= 150, "{}", f.stdout);
     // GUIDED (4) entered.
@@ -330,6 +340,90 @@ async fn arducopter_flies_the_lab_and_brakes_after_the_flight() {
     let (mode, dz) = watch_after_stop("tcpout:127.0.0.1:5772", 10.0).await;
     assert_eq!(mode, Some(Mode::Brake));
     assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
+}
+
+/// A ground station (system 255) on `url`: sends its heartbeat every second (ArduPilot
+/// forwards broadcast messages only to ports where it has heard a system) and keeps every
+/// message that infotrack (system 1, component 191) sent, as forwarded by the autopilot.
+async fn gcs_through_the_autopilot(url: &'static str, heard: Arc<Mutex<Vec<MavMessage>>>) {
+    use mavlink::dialects::ardupilotmega::{MavAutopilot, MavType, HEARTBEAT_DATA};
+    use mavlink::AsyncMavConnection;
+    let conn = loop {
+        match mavlink::connect_async::<MavMessage>(url).await {
+            Ok(c) => break Arc::new(c),
+            Err(_) => tokio::time::sleep(Duration::from_millis(500)).await,
+        }
+    };
+    let beat = {
+        let conn = conn.clone();
+        tokio::spawn(async move {
+            let me = mavlink::MavHeader {
+                system_id: 255,
+                component_id: 190,
+                sequence: 0,
+            };
+            let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                mavtype: MavType::MAV_TYPE_GCS,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                ..Default::default()
+            });
+            loop {
+                let _ = conn.send(&me, &hb).await;
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        })
+    };
+    while let Ok((h, m)) = conn.recv().await {
+        if h.system_id == 1 && h.component_id == 191 {
+            heard.lock().unwrap().push(m);
+        }
+    }
+    beat.abort();
+}
+
+/// Issue 14: the GCS sees the tracker through a router. What the GCS heard of infotrack: its
+/// STATUSTEXTs (tracking started, acquired, the stop), the ~1 Hz NAMED_VALUE_FLOATs and the
+/// estimate as ADSB_VEHICLE `TARGET`.
+fn assert_gcs_heard_the_tracker(heard: &[MavMessage]) {
+    let texts: Vec<String> = heard
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::STATUSTEXT(t) => Some(t.text.to_str().unwrap_or("").to_string()),
+            _ => None,
+        })
+        .collect();
+    let values = heard
+        .iter()
+        .filter(|m| matches!(m, MavMessage::NAMED_VALUE_FLOAT(_)))
+        .count();
+    let targets = heard
+        .iter()
+        .filter(|m| matches!(m, MavMessage::ADSB_VEHICLE(a) if a.callsign.to_str().unwrap_or("") == "TARGET"))
+        .count();
+    println!(
+        "SITL ArduCopter: the GCS on SERIAL2 heard {} messages of infotrack: {} STATUSTEXT {:?}, {} NAMED_VALUE_FLOAT, {} ADSB_VEHICLE TARGET",
+        heard.len(),
+        texts.len(),
+        texts,
+        values,
+        targets
+    );
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.starts_with("infotrack: tracking started")),
+        "{texts:?}"
+    );
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.starts_with("infotrack: target acquired")),
+        "{texts:?}"
+    );
+    // 60 s of tracking: four values a second and one estimate a second, give or take the
+    // start and the link's own pacing.
+    assert!(values >= 4 * 40, "{values} NAMED_VALUE_FLOAT");
+    assert!(targets >= 40, "{targets} ADSB_VEHICLE TARGET");
 }
 
 /// `infotrack params apply` then `params check` with a shipped parameter file, against the

@@ -1,0 +1,217 @@
+//! The one-command install on a machine with systemd running, for real: systemd is booted as
+//! PID 1 of its own namespaces on a copy-on-write overlay of this machine's root
+//! (`tests/systemd/boot.sh`), `scripts/install.sh` installs there as an operator would, and
+//! `systemctl start infotrack` starts the installed unit. The unit must run as the user
+//! `infotrack`, fly (the lab config, whose vehicle is the in-process mock), log to the journal
+//! at RUST_LOG's level without colour codes, stop on `systemctl stop` with the vehicle in
+//! hold, and leave the flight's logs under /var/lib/infotrack/flights. Nothing is written to
+//! the real root: every file lands in the overlay's upper folder, which the test reads.
+//!
+//! Needs root (namespaces, mounts), as `scripts/test.sh` has on the machines it is for; without
+//! it the test fails and says so.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// systemd booted in its own namespaces; killed (and its whole PID namespace with it) on drop.
+struct Machine {
+    unshare: Child,
+    systemd_pid: u32,
+    dir: tempfile::TempDir,
+}
+
+impl Drop for Machine {
+    fn drop(&mut self) {
+        // SAFETY: kill only sends a signal; PID 1 of a namespace dies only of SIGKILL from
+        // outside, and every process of the namespace with it.
+        unsafe {
+            libc::kill(self.systemd_pid as i32, libc::SIGKILL);
+        }
+        let _ = self.unshare.wait();
+    }
+}
+
+impl Machine {
+    fn boot() -> Self {
+        // SAFETY: geteuid has no preconditions.
+        let uid = unsafe { libc::geteuid() };
+        assert_eq!(
+            uid, 0,
+            "this test boots systemd in its own namespaces and needs root (scripts/test.sh runs as root on the machines it is for)"
+        );
+        let project = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+        let dir = tempfile::Builder::new()
+            .prefix("infotrack-systemd-")
+            .tempdir_in("/var/tmp")
+            .unwrap();
+        let console = std::fs::File::create(dir.path().join("console.log")).unwrap();
+        let unshare = Command::new("unshare")
+            .args([
+                "--pid",
+                "--fork",
+                "--mount",
+                "--mount-proc",
+                "--propagation",
+                "private",
+                "bash",
+            ])
+            .arg(project.join("tests/systemd/boot.sh"))
+            .arg(dir.path().join("root"))
+            .arg(&project)
+            .stdout(Stdio::from(console.try_clone().unwrap()))
+            .stderr(Stdio::from(console))
+            .spawn()
+            .unwrap();
+        let pid = unshare.id();
+        let until = Instant::now() + Duration::from_secs(20);
+        let systemd_pid = loop {
+            let children = std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children"))
+                .unwrap_or_default();
+            let found = children.split_whitespace().find_map(|c| {
+                let comm = std::fs::read_to_string(format!("/proc/{c}/comm")).ok()?;
+                (comm.trim() == "systemd")
+                    .then(|| c.parse::<u32>().ok())
+                    .flatten()
+            });
+            if let Some(p) = found {
+                break p;
+            }
+            assert!(
+                Instant::now() < until,
+                "systemd did not start in its namespace within 20 s; console:\n{}",
+                std::fs::read_to_string(dir.path().join("console.log")).unwrap_or_default()
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        };
+        let m = Machine {
+            unshare,
+            systemd_pid,
+            dir,
+        };
+        m.wait_for("systemd running", 60, || {
+            let (_, out) = m.sh("systemctl is-system-running");
+            matches!(out.trim(), "running" | "degraded")
+        });
+        m
+    }
+
+    /// Runs `script` with bash inside the machine (its mounts, PIDs, root and working
+    /// folder); its exit status and what it printed.
+    fn sh(&self, script: &str) -> (bool, String) {
+        let o = Command::new("nsenter")
+            .args(["-t", &self.systemd_pid.to_string(), "-m", "-p", "-r", "-w"])
+            .args(["bash", "-c", script])
+            .output()
+            .unwrap();
+        (
+            o.status.success(),
+            format!(
+                "{}{}",
+                String::from_utf8_lossy(&o.stdout),
+                String::from_utf8_lossy(&o.stderr)
+            ),
+        )
+    }
+
+    fn must(&self, script: &str) -> String {
+        let (ok, out) = self.sh(script);
+        assert!(ok, "`{script}` failed in the booted machine:\n{out}");
+        out
+    }
+
+    fn wait_for(&self, what: &str, secs: u64, mut done: impl FnMut() -> bool) {
+        let until = Instant::now() + Duration::from_secs(secs);
+        while !done() {
+            assert!(
+                Instant::now() < until,
+                "{what}: not within {secs} s; journal:\n{}",
+                self.sh("journalctl --no-pager -n 60").1
+            );
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    }
+
+    /// A path of the machine's root as written by it (the overlay's upper folder).
+    fn written(&self, path: &str) -> PathBuf {
+        self.dir
+            .path()
+            .join("root/upper")
+            .join(path.trim_start_matches('/'))
+    }
+}
+
+fn journal(m: &Machine) -> String {
+    m.sh("journalctl -u infotrack -o cat --no-pager").1
+}
+
+#[test]
+fn the_installed_unit_starts_flies_the_mock_as_its_user_and_keeps_its_logs() {
+    let m = Machine::boot();
+    let project = env!("CARGO_MANIFEST_DIR");
+    let binary = env!("CARGO_BIN_EXE_infotrack");
+    assert!(
+        Path::new(binary).starts_with(project),
+        "the test binary {binary} must be inside the project (bound into the machine)"
+    );
+    // The one command, with the lab config (its vehicle is the in-process mock).
+    let said = m.must(&format!(
+        "cd {project} && bash scripts/install.sh --binary {binary} --config default.toml"
+    ));
+    assert!(said.contains("systemctl enable --now infotrack"), "{said}");
+    m.must("systemctl start infotrack");
+    m.wait_for("the unit tracking", 90, || {
+        journal(&m).contains("infotrack: tracking started")
+    });
+    let user = m.must("ps -o user:20= -C infotrack");
+    assert_eq!(
+        user.trim(),
+        "infotrack",
+        "the daemon runs as `{}`",
+        user.trim()
+    );
+    std::thread::sleep(Duration::from_secs(5));
+    m.must("systemctl stop infotrack");
+    let (_, state) = m.sh("systemctl is-active infotrack");
+    assert_eq!(state.trim(), "inactive", "after systemctl stop");
+    let status = m.must("systemctl show -p ExecMainStatus --value infotrack");
+    assert_eq!(status.trim(), "0", "the daemon's exit status");
+
+    let j = journal(&m);
+    println!("journal of the unit:\n{j}");
+    // RUST_LOG=info from the unit is honoured (the unit passes no --log), plain text.
+    assert!(
+        j.contains(" INFO "),
+        "no INFO lines: RUST_LOG ignored?\n{j}"
+    );
+    assert!(!j.contains('\u{1b}'), "colour codes in the journal\n{j}");
+    assert!(j.contains("ended in HOLD"), "{j}");
+
+    // The flight's logs, in one folder under /var/lib/infotrack/flights, owned by the user.
+    let flights = m.written("/var/lib/infotrack/flights");
+    let folders: Vec<PathBuf> = std::fs::read_dir(&flights)
+        .unwrap_or_else(|e| panic!("{}: {e}", flights.display()))
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(folders.len(), 1, "{folders:?}");
+    for f in ["summary.json", "flight.csv", "steps.csv", "link.tlog"] {
+        assert!(
+            folders[0].join(f).is_file(),
+            "{f} missing in {:?}",
+            folders[0]
+        );
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folders[0].join("summary.json")).unwrap())
+            .unwrap();
+    let tracking = summary["tracking_error_m"].as_f64();
+    assert!(
+        tracking.is_some_and(f64::is_finite),
+        "summary.json has no tracking error: {summary}"
+    );
+    let owner = m.must(&format!(
+        "stat -c %U /var/lib/infotrack/flights/{}/summary.json",
+        folders[0].file_name().unwrap().to_string_lossy()
+    ));
+    assert_eq!(owner.trim(), "infotrack");
+}
