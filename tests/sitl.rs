@@ -63,12 +63,26 @@ fn start(script: &str, args: &[&str]) -> Sitl {
     Sitl { child, _dir: dir }
 }
 
-/// The lab world with the timeouts a real boot needs (ArduCopter refuses to arm for ~45 s).
-fn lab_config(dir: &Path) -> PathBuf {
+/// `config/NAME` with the timeouts a real boot needs (ArduCopter refuses to arm for ~45 s,
+/// and climbs to a field world's 45 m at ~2.5 m/s).
+fn sitl_config(dir: &Path, name: &str) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut text = std::fs::read_to_string(root.join("config/default.toml")).unwrap();
-    text.push_str("\n[daemon]\ntakeoff_timeout_s = 120.0\nconnect_timeout_s = 60.0\n");
-    let p = dir.join("lab-sitl.toml");
+    let mut text = std::fs::read_to_string(root.join("config").join(name)).unwrap();
+    // The copy lives elsewhere: a model path relative to config/ becomes absolute.
+    let model = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("dmmn_model = \""))
+        .and_then(|rest| rest.split('"').next())
+        .map(str::to_string);
+    if let Some(m) = model {
+        let absolute = root.join("config").join(&m);
+        text = text.replace(
+            &format!("\"{m}\""),
+            &format!("{:?}", absolute.display().to_string()),
+        );
+    }
+    text.push_str("\n[daemon]\ntakeoff_timeout_s = 150.0\nconnect_timeout_s = 60.0\n");
+    let p = dir.join(format!("sitl-{name}"));
     std::fs::write(&p, text).unwrap();
     p
 }
@@ -82,6 +96,11 @@ struct Flight {
 }
 
 fn fly(vehicle: &str, seconds: u32) -> Flight {
+    fly_world(vehicle, seconds, "default.toml")
+}
+
+/// A flight of `seconds` on the world of `config/NAME`.
+fn fly_world(vehicle: &str, seconds: u32, name: &str) -> Flight {
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("out");
     let o = Command::new(env!("CARGO_BIN_EXE_infotrack"))
@@ -96,7 +115,7 @@ fn fly(vehicle: &str, seconds: u32) -> Flight {
         ])
         .arg(seconds.to_string())
         .arg("--config")
-        .arg(lab_config(dir.path()))
+        .arg(sitl_config(dir.path(), name))
         .arg("--out")
         .arg(&out_dir)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -340,6 +359,56 @@ async fn arducopter_flies_the_lab_and_brakes_after_the_flight() {
     let (mode, dz) = watch_after_stop("tcpout:127.0.0.1:5772", 10.0).await;
     assert_eq!(mode, Some(Mode::Brake));
     assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs the SITL builds: run by scripts/sitl-test.sh"]
+async fn arducopter_flies_the_field_world() {
+    // The outdoor world (a car at 10 m/s on km of roads, the drone at 45 m, a 1280x720
+    // camera and a 1.2 m roof tag), found from the operator's cue, with position + velocity
+    // targets: what field operators fly.
+    let _ac = start("arducopter/start.sh", &["2", "serial0=tcp:0"]);
+    let f = tokio::task::spawn_blocking(|| fly_world("tcpout:127.0.0.1:5782", 90, "outdoor.toml"))
+        .await
+        .unwrap();
+    report("ArduCopter field", &f);
+    let tag = tag_frames(&f);
+    println!(
+        "SITL ArduCopter field: the tag in {}/{} frames",
+        tag.0, tag.1
+    );
+    assert!(f.stdout.contains("ardupilot vehicle"), "{}", f.stdout);
+    // The loop runs at field scale on the real firmware: GUIDED, 90 s of filter steps at
+    // 3 Hz, setpoints at the configured 20 Hz.
+    assert!(filter_steps(&f) >= 240, "{}", f.stdout);
+    assert!(f
+        .tlog
+        .iter()
+        .any(|(_, _, m)| matches!(m, MavMessage::HEARTBEAT(h) if h.custom_mode == 4)));
+    let rate = setpoint_rate_hz(&f);
+    assert!((15.0..=25.0).contains(&rate), "setpoints at {rate:.1} Hz");
+    // No bar on finding the car: on ArduCopter it is not found (0 of ~270 frames, session
+    // 11): GUIDED caps the horizontal speed at WPNAV_SPEED (10 m/s by default, 12 m/s with
+    // the shipped parameter file) and the car, at 10 m/s, starts 50 m from the drone; the
+    // mock's agent flies at the config's 15 m/s. Issue 12's note carries it.
+    // After the flight the vehicle holds the field altitude without RC (BRAKE).
+    let (mode, dz) = watch_after_stop("tcpout:127.0.0.1:5782", 10.0).await;
+    assert_eq!(mode, Some(Mode::Brake));
+    assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
+}
+
+/// Frames with the tag and frames, from the results table's `frames with tag` column.
+fn tag_frames(f: &Flight) -> (u64, u64) {
+    f.stdout
+        .lines()
+        .filter(|l| l.starts_with('|'))
+        .find_map(|l| {
+            l.split('|').find_map(|c| {
+                let (a, b) = c.trim().split_once('/')?;
+                Some((a.trim().parse().ok()?, b.trim().parse().ok()?))
+            })
+        })
+        .unwrap_or((0, 0))
 }
 
 /// A ground station (system 255) on `url`: sends its heartbeat every second (ArduPilot

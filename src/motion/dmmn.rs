@@ -220,7 +220,7 @@ impl Dmmn {
     pub fn load(model_path: &Path, params: &MotionParams) -> Result<Self, MotionError> {
         if !model_path.is_file() {
             return Err(err(format!(
-                "model file {} not found (set motion.dmmn_model; relative paths are from the current directory)",
+                "model file {} not found (set motion.dmmn_model; a relative path is read from the config file's folder)",
                 model_path.display()
             )));
         }
