@@ -357,6 +357,18 @@ impl Response {
 /// the hold's climb), whichever is larger. One flight of a real autopilot wanders, so the
 /// range of several is the reference, not one of them.
 pub fn assert_within(name: &str, a: &Figures, reference: &str, flights: &[Figures]) {
+    assert_within_floors(name, a, reference, flights, &[]);
+}
+
+/// [`assert_within`] with larger absolute floors for the named figures (`floors`: figure,
+/// metres or seconds), where a reference's recordings are known to understate its spread.
+pub fn assert_within_floors(
+    name: &str,
+    a: &Figures,
+    reference: &str,
+    flights: &[Figures],
+    floors: &[(&str, f64)],
+) {
     assert!(!flights.is_empty(), "no recorded flights of {reference}");
     type Get = fn(&Figures) -> f64;
     let checks: [(&str, Get, f64, f64); 9] = [
@@ -376,7 +388,11 @@ pub fn assert_within(name: &str, a: &Figures, reference: &str, flights: &[Figure
         let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let mean = values.iter().sum::<f64>() / values.len() as f64;
-        let margin = abs.max(rel * mean.abs());
+        let floor = floors
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map_or(abs, |(_, f)| f.max(abs));
+        let margin = floor.max(rel * mean.abs());
         let x = get(a);
         if !(x >= lo - margin && x <= hi + margin) {
             off.push(format!(
