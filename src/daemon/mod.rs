@@ -24,6 +24,7 @@ pub mod pipeline;
 pub mod pose_history;
 pub mod recorder;
 pub mod replay;
+mod vehicle_speed;
 
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
@@ -264,7 +265,9 @@ fn free_udp_port() -> Result<u16, DaemonError> {
 }
 
 /// Starts the in-process mock for `mock:px4` / `mock:ardupilot`, with the agent's speed and
-/// acceleration limits as its parameters; returns it and the URL to reach it.
+/// acceleration limits as its parameters and ArduPilot's lean limit as the shipped
+/// parameter file sets it: a vehicle set up as the README says (a real one needs the same
+/// parameters loaded before take-off); returns it and the URL to reach it.
 async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String), DaemonError> {
     let port = free_udp_port()?;
     let mut mc = MockConfig::new(flavor);
@@ -282,6 +285,8 @@ async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String)
         Flavor::ArduPilot => vec![
             ("WPNAV_SPEED".into(), a.speed_limit_mps * 100.0),
             ("WPNAV_ACCEL".into(), a.accel_limit_mps2 * 100.0),
+            // firmware-params/ardupilot-guided-tracking.parm: 45 degrees, in centidegrees.
+            ("ANGLE_MAX".into(), 4500.0),
         ],
     };
     let mock = spawn(&format!("udpin:127.0.0.1:{port}"), mc, Faults::default())
@@ -521,6 +526,7 @@ async fn connect(
         }
     };
     tracing::info!("vehicle: {flavor} on {url}");
+    vehicle_speed::warn_if_slower_than_planned(cfg, &link, flavor).await;
     Ok(Vehicle {
         link,
         flavor,

@@ -276,6 +276,7 @@ impl MockAutopilot {
                 xy_accel_mps2: self.params.get("MPC_ACC_HOR", 3.0),
                 climb_mps: self.params.get("MPC_Z_VEL_MAX_UP", 3.0),
                 descend_mps: self.params.get("MPC_Z_VEL_MAX_DN", 1.5),
+                max_tilt_rad: self.params.get("MPC_TILTMAX_AIR", 45.0).to_radians(),
             },
             // ArduPilot's speeds are in cm/s.
             Flavor::ArduPilot => Limits {
@@ -283,6 +284,8 @@ impl MockAutopilot {
                 xy_accel_mps2: self.params.get("WPNAV_ACCEL", 250.0) / 100.0,
                 climb_mps: self.params.get("WPNAV_SPEED_UP", 250.0) / 100.0,
                 descend_mps: self.params.get("WPNAV_SPEED_DN", 150.0) / 100.0,
+                // Centidegrees.
+                max_tilt_rad: (self.params.get("ANGLE_MAX", 3000.0) / 100.0).to_radians(),
             },
         }
     }

@@ -14,6 +14,21 @@ pub struct Limits {
     pub climb_mps: f64,
     /// Descent rate limit, m/s.
     pub descend_mps: f64,
+    /// Largest lean angle the attitude controller allows, rad (ArduPilot ANGLE_MAX, PX4
+    /// MPC_TILTMAX_AIR): with the airframe's drag it caps the speed it can hold.
+    pub max_tilt_rad: f64,
+}
+
+impl Limits {
+    /// The horizontal speed the vehicle can hold: its speed parameter, or less where the
+    /// lean it would need against the airframe's drag is more than the tilt limit allows.
+    pub fn holdable_xy_speed_mps(&self, response: &Response) -> f64 {
+        if response.drag_per_s <= 0.0 {
+            return self.xy_speed_mps;
+        }
+        let top = GRAVITY_MPS2 * self.max_tilt_rad.tan() / response.drag_per_s;
+        self.xy_speed_mps.min(top)
+    }
 }
 
 /// Position and velocity, local NED, metres and m/s.
@@ -23,7 +38,8 @@ pub struct KinematicState {
     pub pos_ned_m: [f64; 3],
     /// [north, east, down], m/s.
     pub vel_ned_mps: [f64; 3],
-    /// Last horizontal acceleration [north, east], m/s^2 (for the attitude).
+    /// The horizontal force per unit mass the lean last produced [north, east], m/s^2: the
+    /// acceleration plus what the drag takes (for the attitude).
     pub acc_ned_mps2: [f64; 2],
 }
 
@@ -52,6 +68,10 @@ pub struct Response {
     pub wander_vertical_m: f64,
     /// The wander's correlation time, s.
     pub wander_correlation_s: f64,
+    /// The airframe's linear drag, horizontal deceleration per m/s of airspeed, 1/s: a
+    /// steady speed v needs a lean of atan(drag * v / g), so the tilt limit caps the speed
+    /// (0: no drag, the speed parameter alone limits).
+    pub drag_per_s: f64,
 }
 
 impl Response {
@@ -75,6 +95,7 @@ impl Response {
         wander_horizontal_m: 0.0,
         wander_vertical_m: 0.0,
         wander_correlation_s: 1.0,
+        drag_per_s: 0.0,
     };
 
     /// PX4 SIH (airframe 10040, default parameters) answering offboard position targets:
@@ -88,10 +109,13 @@ impl Response {
         wander_horizontal_m: 0.25,
         wander_vertical_m: 0.08,
         wander_correlation_s: 2.5,
+        drag_per_s: PX4_SIH_DRAG_PER_S,
     };
 
     /// ArduCopter SITL (the `quad` model, copter.parm) answering GUIDED position targets:
-    /// well damped and steady.
+    /// well damped and steady; at ANGLE_MAX 30 degrees (the default) it holds 10.3 m/s
+    /// whatever WPNAV_SPEED says (the field flight, BENCHMARKS "The field world on
+    /// ArduCopter").
     pub const ARDUCOPTER_SITL: Response = Response {
         position_gain_per_s: 0.9,
         velocity_lag_s: 0.6,
@@ -101,8 +125,18 @@ impl Response {
         wander_horizontal_m: 0.0,
         wander_vertical_m: 0.0,
         wander_correlation_s: 1.0,
+        drag_per_s: ARDUCOPTER_SITL_DRAG_PER_S,
     };
 }
+
+/// PX4 SIH (SIH_KDV 1 N s/m on SIH_MASS 1 kg) held 9.9 m/s at MPC_TILTMAX_AIR's 45 degrees
+/// (steady tilt 45.0 degrees, speed 9.8-10.0 m/s, with MPC_XY_VEL_MAX 12 m/s): g / 9.9.
+const PX4_SIH_DRAG_PER_S: f64 = GRAVITY_MPS2 / 9.9;
+
+/// ArduCopter SITL's `quad` held 10.3 m/s at its 30 degree lean limit in level flight
+/// (steady pitch 30.0 degrees, speed 10.2-10.8 m/s, with WPNAV_SPEED 15 m/s), and reached
+/// 15 m/s at 45 degrees: g tan(30 deg) / 10.3.
+const ARDUCOPTER_SITL_DRAG_PER_S: f64 = GRAVITY_MPS2 * 0.577_350_269 / 10.3;
 
 const GRAVITY_MPS2: f64 = 9.80665;
 
@@ -133,9 +167,10 @@ impl KinematicState {
                 ];
                 // Horizontal speed limit on the norm; vertical limits by direction.
                 let h = v[0].hypot(v[1]);
-                if h > limits.xy_speed_mps {
-                    v[0] *= limits.xy_speed_mps / h;
-                    v[1] *= limits.xy_speed_mps / h;
+                let xy_max = limits.holdable_xy_speed_mps(response);
+                if h > xy_max {
+                    v[0] *= xy_max / h;
+                    v[1] *= xy_max / h;
                 }
                 let climb = if cmd.taking_off {
                     limits.climb_mps.min(response.takeoff_climb_mps)
@@ -160,7 +195,11 @@ impl KinematicState {
             dv[0] *= max / n;
             dv[1] *= max / n;
         }
-        self.acc_ned_mps2 = [dv[0] / dt_s, dv[1] / dt_s];
+        // The lean holds the acceleration and the drag at the new speed.
+        self.acc_ned_mps2 = [
+            dv[0] / dt_s + response.drag_per_s * (self.vel_ned_mps[0] + dv[0]),
+            dv[1] / dt_s + response.drag_per_s * (self.vel_ned_mps[1] + dv[1]),
+        ];
         self.vel_ned_mps[0] += dv[0];
         self.vel_ned_mps[1] += dv[1];
         // Vertical: first-order, fast enough that climbs are rate-limited, not lagged.
@@ -202,6 +241,7 @@ mod tests {
         xy_accel_mps2: 3.0,
         climb_mps: 2.0,
         descend_mps: 1.0,
+        max_tilt_rad: std::f64::consts::FRAC_PI_4,
     };
 
     fn to(t: [f64; 3]) -> Command {
@@ -235,6 +275,61 @@ mod tests {
             let t90 = t90.unwrap();
             assert!(rise.contains(&t90), "{r:?}: 90 % after {t90} s");
             assert!(overshoot.contains(&peak), "{r:?}: overshoot {peak} m");
+        }
+    }
+
+    /// The speed each SITL build held on a long leg at its lean limit (ArduCopter at 30
+    /// and 45 degrees with WPNAV_SPEED 15 m/s, PX4 SIH at 45 degrees with MPC_XY_VEL_MAX
+    /// 12 m/s), and the lean it flew it at.
+    #[test]
+    fn the_lean_limit_caps_the_speed_as_on_each_sitl() {
+        let deg = |d: f64| d.to_radians();
+        for (r, speed_param, tilt, held, leaned) in [
+            (
+                Response::ARDUCOPTER_SITL,
+                15.0,
+                deg(30.0),
+                10.0..10.6,
+                deg(29.0)..deg(30.5),
+            ),
+            (
+                Response::ARDUCOPTER_SITL,
+                15.0,
+                deg(45.0),
+                14.9..15.1,
+                deg(38.0)..deg(45.5),
+            ),
+            (
+                Response::PX4_SIH,
+                12.0,
+                deg(45.0),
+                9.6..10.1,
+                deg(44.0)..deg(45.5),
+            ),
+            (Response::IDEAL, 15.0, deg(30.0), 14.9..15.1, 0.0..deg(1.0)),
+        ] {
+            let limits = Limits {
+                xy_speed_mps: speed_param,
+                xy_accel_mps2: 2.5,
+                climb_mps: 2.5,
+                descend_mps: 1.5,
+                max_tilt_rad: tilt,
+            };
+            let mut s = KinematicState::default();
+            let dt = 0.02;
+            let cmd = Command {
+                target_ned_m: Some([0.0, 2000.0, 0.0]),
+                feed_forward_ned_mps: [0.0, speed_param, 0.0],
+                taking_off: false,
+            };
+            for _ in 0..(40.0 / dt) as usize {
+                s.step(&cmd, &limits, &r, dt);
+            }
+            let speed = s.vel_ned_mps[0].hypot(s.vel_ned_mps[1]);
+            let (roll, pitch) = s.attitude(std::f64::consts::FRAC_PI_2);
+            let lean = (roll.cos() * pitch.cos()).acos();
+            assert!(held.contains(&speed), "{r:?} at {tilt} rad: {speed} m/s");
+            assert!(leaned.contains(&lean), "{r:?}: lean {lean} rad");
         }
     }
 
