@@ -54,7 +54,9 @@ fn speed_warnings(
     let mut out = Vec::new();
     if let Some(v) = speed_mps.filter(|v| *v + 1e-6 < planned_mps) {
         out.push(format!(
-            "the vehicle's {speed_name} is {v:.1} m/s, below agent.speed_limit_mps =              {planned_mps:.1} m/s: it will trail the guidance's plans; load {file} (or set              {speed_name}) before take-off and reboot"
+            "the vehicle's {speed_name} is {v:.1} m/s, below agent.speed_limit_mps = \
+             {planned_mps:.1} m/s: it will trail the guidance's plans; load {file} (or set \
+             {speed_name}) before take-off and reboot"
         ));
     }
     // What the SITL airframes held at their lean limits (10.3 m/s at 30 degrees for
@@ -62,7 +64,9 @@ fn speed_warnings(
     // doubtful on most multicopters.
     if let Some(t) = tilt_deg.filter(|t| *t + 1e-6 < 45.0 && planned_mps > 10.0) {
         out.push(format!(
-            "the vehicle's {tilt_name} allows {t:.0} degrees of lean: check that the airframe              holds agent.speed_limit_mps = {planned_mps:.1} m/s at that lean (ArduCopter's SITL              quad holds 10.3 m/s at 30 degrees)"
+            "the vehicle's {tilt_name} allows {t:.0} degrees of lean: check that the airframe \
+             holds agent.speed_limit_mps = {planned_mps:.1} m/s at that lean (ArduCopter's SITL \
+             quad holds 10.3 m/s at 30 degrees)"
         ));
     }
     out
@@ -79,6 +83,7 @@ mod tests {
         assert!(w[0].contains("WPNAV_SPEED is 10.0 m/s") && w[0].contains("15.0"));
         assert!(w[0].contains("ardupilot-guided-tracking.parm"));
         assert!(w[1].contains("ANGLE_MAX allows 30 degrees"));
+        assert!(w.iter().all(|x| !x.contains("  ")), "one line each: {w:?}");
         let w = speed_warnings(Flavor::Px4, Some(12.0), Some(45.0), 15.0);
         assert_eq!(w.len(), 1, "{w:?}");
         assert!(w[0].contains("MPC_XY_VEL_MAX is 12.0 m/s"));

@@ -806,12 +806,16 @@ impl MockAutopilot {
                 self.offboard_lost = true;
                 self.failsafe("offboard signal lost", mode, &mut out);
             }
-            // ArduPilot GCS failsafe.
+            // ArduPilot GCS failsafe: only once a GCS has been heard. ArduCopter SITL with
+            // FS_GCS_ENABLE = 1 from boot and no GCS flew GUIDED for 90 s without it (the
+            // field flight, session 12); a companion-only flight is not a lost GCS.
             let fs = self.params.get("FS_GCS_ENABLE", 0.0) as i64;
             if self.cfg.flavor == Flavor::ArduPilot && fs != 0 && !self.gcs_failsafe {
                 let timeout = self.params.get("FS_GCS_TIMEOUT", 5.0);
-                let last = self.last_gcs_heartbeat_s.unwrap_or(self.boot_s);
-                if now_s - last > timeout {
+                if self
+                    .last_gcs_heartbeat_s
+                    .is_some_and(|last| now_s - last > timeout)
+                {
                     self.gcs_failsafe = true;
                     let mode = match fs {
                         5 => Mode::Land,
