@@ -274,3 +274,14 @@ fn eer_over_a_concentrated_belief_moves_with_the_target() {
         "{velocity_enu}"
     );
 }
+
+/// A waypoint beyond one horizon's reach is approached at the top speed (reach / horizon)
+/// along the way; one within reach is a fixed point, as before.
+#[test]
+fn a_far_waypoint_is_approached_at_top_speed_and_a_near_one_is_a_fixed_point() {
+    let v = super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(300.0, 400.0), 2.0, 30.0);
+    assert!((v.norm() - 15.0).abs() < 1e-9, "{v}");
+    assert!((v.x / v.norm() - 0.6).abs() < 1e-9 && (v.y / v.norm() - 0.8).abs() < 1e-9);
+    let near = super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(20.0, 0.0), 2.0, 30.0);
+    assert_eq!(near, Enu2::zeros());
+}
