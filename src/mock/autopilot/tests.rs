@@ -184,10 +184,9 @@ fn ardupilot_takeoff_then_guided_targets() {
     );
 }
 
-/// As ArduCopter SITL did with FS_GCS_ENABLE = 1 from boot: no GCS ever heard, no GCS
-/// failsafe (the companion flies on).
-#[test]
-fn ardupilot_gcs_failsafe_waits_for_a_gcs_to_be_heard() {
+/// An ArduPilot mock with FS_GCS_ENABLE = 1, armed in GUIDED; its heartbeat, and the
+/// companion's header (system 1, component 191), whose heartbeats the failsafe ignores.
+fn armed_in_guided_with_gcs_failsafe() -> (MockAutopilot, MavMessage, MavHeader) {
     let mut cfg = MockConfig::new(Flavor::ArduPilot);
     cfg.param_overrides = vec![("FS_GCS_ENABLE".into(), 1.0)];
     let mut m = MockAutopilot::new(cfg, 0.0);
@@ -199,6 +198,14 @@ fn ardupilot_gcs_failsafe_waits_for_a_gcs_to_be_heard() {
         component_id: 191,
         sequence: 0,
     };
+    (m, hb, companion)
+}
+
+/// As ArduCopter SITL did with FS_GCS_ENABLE = 1 from boot: no GCS ever heard, no GCS
+/// failsafe (the companion flies on).
+#[test]
+fn ardupilot_gcs_failsafe_waits_for_a_gcs_to_be_heard() {
+    let (mut m, hb, companion) = armed_in_guided_with_gcs_failsafe();
     let mut t = 0.0;
     while t < 30.0 {
         t += 0.5;
@@ -211,17 +218,7 @@ fn ardupilot_gcs_failsafe_waits_for_a_gcs_to_be_heard() {
 
 #[test]
 fn ardupilot_gcs_failsafe_counts_only_gcs_heartbeats() {
-    let mut cfg = MockConfig::new(Flavor::ArduPilot);
-    cfg.param_overrides = vec![("FS_GCS_ENABLE".into(), 1.0)];
-    let mut m = MockAutopilot::new(cfg, 0.0);
-    set_mode(&mut m, 0.0, Mode::Guided);
-    arm(&mut m, 0.0);
-    let hb = m.heartbeat();
-    let companion = MavHeader {
-        system_id: 1,
-        component_id: 191,
-        sequence: 0,
-    };
+    let (mut m, hb, companion) = armed_in_guided_with_gcs_failsafe();
     let mut t = 0.0;
     while t < 4.0 {
         t += 0.5;
