@@ -11,7 +11,11 @@
 //! when EER began to fly a waypoint beyond one horizon's reach at top speed with the velocity
 //! as feed-forward (BENCHMARKS "Field scale, part 6"): a new behaviour, so EER rows moved (lab
 //! Monte Carlo runs by up to 11 points of FOV either way; the 30 s closed-loop seed 3 from
-//! 30.3 % to 12.4 %); the CV/KF/PFWM rows that do not plan with EER did not move.
+//! 30.3 % to 12.4 %); the CV/KF/PFWM rows that do not plan with EER did not move. A third
+//! time in session 13, when that transit was restricted to waypoints beyond the reachable
+//! grid's corners (sqrt(2) x reach; BENCHMARKS "Field scale, part 7"): the lab's EER rows
+//! went back to what they were before session 12 in most runs (the 30 s closed-loop seed 3
+//! from 12.4 % to 30.3 %; largest change 17.98 points there, 11.1 in the Monte Carlo rows).
 
 use std::path::Path;
 use std::process::Command;

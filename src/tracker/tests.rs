@@ -275,8 +275,9 @@ fn eer_over_a_concentrated_belief_moves_with_the_target() {
     );
 }
 
-/// A waypoint beyond one horizon's reach is approached at the top speed (reach / horizon)
-/// along the way; one within reach is a fixed point, as before.
+/// A waypoint beyond the reachable grid's corners (sqrt(2) x reach) is approached at the top
+/// speed (reach / horizon) along the way; one within them, the grid's corner included, is a
+/// fixed point, as before.
 #[test]
 fn a_far_waypoint_is_approached_at_top_speed_and_a_near_one_is_a_fixed_point() {
     let v = super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(300.0, 400.0), 2.0, 30.0);
@@ -284,4 +285,9 @@ fn a_far_waypoint_is_approached_at_top_speed_and_a_near_one_is_a_fixed_point() {
     assert!((v.x / v.norm() - 0.6).abs() < 1e-9 && (v.y / v.norm() - 0.8).abs() < 1e-9);
     let near = super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(20.0, 0.0), 2.0, 30.0);
     assert_eq!(near, Enu2::zeros());
+    let corner = super::approach_velocity(&Enu2::new(5.0, 5.0), &Enu2::new(35.0, 35.0), 2.0, 30.0);
+    assert_eq!(corner, Enu2::zeros(), "the grid's corner is a fixed point");
+    let just_beyond =
+        super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(43.0, 0.0), 2.0, 30.0);
+    assert!((just_beyond.norm() - 15.0).abs() < 1e-9, "{just_beyond}");
 }
