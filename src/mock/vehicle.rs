@@ -106,9 +106,13 @@ impl Response {
         vertical_gain_per_s: 0.35,
         spool_up_s: 2.3,
         takeoff_climb_mps: 0.3,
-        wander_horizontal_m: 0.25,
+        // Fitted over 21 seeds of the probe (BENCHMARKS "The mock calibrated against
+        // SITL"): 0.35 m and 5 s put the median hover RMS, overshoot, lags and hold drift
+        // inside PX4 SIH's recorded ranges (0.25 m / 2.5 s left the overshoot at 0.19 m,
+        // on the edge of the range's margin).
+        wander_horizontal_m: 0.35,
         wander_vertical_m: 0.08,
-        wander_correlation_s: 2.5,
+        wander_correlation_s: 5.0,
         drag_per_s: PX4_SIH_DRAG_PER_S,
     };
 
