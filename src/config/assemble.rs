@@ -90,6 +90,9 @@ impl Config {
         let g = &self.guidance;
         EerParams {
             entropy_particles: g.entropy_particles,
+            entropy_particles_concentrated: g
+                .entropy_particles_concentrated
+                .unwrap_or(g.entropy_particles),
             measurements_per_particle: g.measurements_per_particle,
             horizon_steps: g.horizon_steps,
             grid_side: g.candidate_grid_side,

@@ -91,6 +91,13 @@ pub(super) fn check(c: &Config) -> Result<(), ConfigError> {
         g.entropy_particles,
         MAX_ENTROPY_PARTICLES,
     )?;
+    if let Some(n) = g.entropy_particles_concentrated {
+        at_most_usize(
+            "guidance.entropy_particles_concentrated",
+            n,
+            MAX_ENTROPY_PARTICLES,
+        )?;
+    }
     at_most_usize(
         "guidance.measurements_per_particle",
         g.measurements_per_particle,

@@ -204,11 +204,17 @@ fn a_cue_outside_the_workspace_or_off_every_road_names_the_key() {
 #[test]
 fn sizes_and_rates_that_would_exhaust_the_companion_are_refused_naming_the_key() {
     use toml::Value::{Float, Integer};
-    let cases: [(&str, &str, toml::Value); 10] = [
+    let cases: [(&str, &str, toml::Value); 12] = [
         ("filter", "particles", Integer(1_000_000_000)),
         ("filter", "history_len", Integer(100_000_000)),
         ("guidance", "candidate_grid_side", Integer(1_000_000)),
         ("guidance", "entropy_particles", Integer(1_000_000)),
+        (
+            "guidance",
+            "entropy_particles_concentrated",
+            Integer(1_000_000),
+        ),
+        ("guidance", "entropy_particles_concentrated", Integer(0)),
         ("guidance", "horizon_steps", Integer(100_000)),
         ("guidance", "measurements_per_particle", Integer(100_000)),
         ("timing", "physics_hz", Float(1e12)),

@@ -232,6 +232,9 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
 
     let g = &c.guidance;
     count("guidance.entropy_particles", g.entropy_particles)?;
+    if let Some(n) = g.entropy_particles_concentrated {
+        count("guidance.entropy_particles_concentrated", n)?;
+    }
     count(
         "guidance.measurements_per_particle",
         g.measurements_per_particle,

@@ -42,6 +42,8 @@ use crate::world::World;
 pub struct EerParams {
     /// N_H.
     pub entropy_particles: usize,
+    /// N_H while the belief is concentrated ([`belief_is_concentrated`]).
+    pub entropy_particles_concentrated: usize,
     /// N_M.
     pub measurements_per_particle: usize,
     /// K.
@@ -312,6 +314,19 @@ pub fn evaluate_reference(
     (h0, eer)
 }
 
+/// Whether the filter's belief fits in one view: its weighted standard deviation along each
+/// world axis at most a quarter of the footprint's width along it (+-2 sigma in view at
+/// once). Then EER's choice is where to put the footprint over one compact cluster, which
+/// fewer hypotheses can show at a fraction of the cost; a spread or split belief (searching,
+/// after an occluded junction) keeps `entropy_particles`, where every hypothesis paid
+/// (BENCHMARKS "Field scale, part 8").
+pub fn belief_is_concentrated(pf: &ParticleFilter, world: &World) -> bool {
+    let cov = pf.covariance();
+    let fp = &world.footprint;
+    // A NaN variance compares false: not concentrated, every hypothesis kept.
+    cov[(0, 0)].sqrt() <= 0.5 * fp.half_width_m && cov[(1, 1)].sqrt() <= 0.5 * fp.half_height_m
+}
+
 /// The EER guidance law: owns its scratch buffers across cycles.
 #[derive(Debug, Clone)]
 pub struct EerPlanner {
@@ -351,7 +366,11 @@ impl EerPlanner {
         rng: &mut R,
     ) -> Result<&EerInputs, MotionError> {
         let n = pf.weights().len();
-        let n_h = self.params.entropy_particles;
+        let n_h = if belief_is_concentrated(pf, world) {
+            self.params.entropy_particles_concentrated
+        } else {
+            self.params.entropy_particles
+        };
         self.indices.clear();
         if n_h >= n {
             self.indices.extend(0..n);

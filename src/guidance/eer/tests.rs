@@ -210,3 +210,80 @@ fn fast_measured_entropy_equals_the_plain_formula() {
         assert!((a - b).abs() < 1e-10, "{a} vs {b}");
     }
 }
+
+/// A filter of 200 particles over the lab, with the weight either on the particles within
+/// `radius_m` of the workspace's centre or spread over all of them.
+fn lab_filter(c: &Config, radius_m: Option<f64>) -> ParticleFilter {
+    let mut rng = CoreRng::seed_from_u64(21);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    if let Some(r) = radius_m {
+        let centre = c.workspace_enu.center();
+        let w: Vec<f64> = (0..pf.weights().len())
+            .map(|i| f64::from(u8::from((pf.particle(i) - centre).norm() <= r)))
+            .collect();
+        assert!(
+            pf.set_weights(&w),
+            "some particle within {r} m of the centre"
+        );
+    }
+    pf
+}
+
+#[test]
+fn a_belief_inside_one_view_is_concentrated_and_a_spread_one_is_not() {
+    let mut c = Config::default_lab();
+    c.filter.particles = 200;
+    let world = c.world();
+    let fp = world.footprint;
+    let quarter = 0.5 * fp.half_width_m.min(fp.half_height_m);
+    // Within a disc of radius r the standard deviation per axis is r / 2.
+    assert!(belief_is_concentrated(
+        &lab_filter(&c, Some(0.9 * quarter)),
+        &world
+    ));
+    assert!(!belief_is_concentrated(
+        &lab_filter(&c, Some(3.0 * fp.half_width_m.max(fp.half_height_m))),
+        &world
+    ));
+    assert!(!belief_is_concentrated(&lab_filter(&c, None), &world));
+}
+
+#[test]
+fn a_concentrated_belief_is_planned_with_the_concentrated_hypothesis_count() {
+    let mut c = Config::default_lab();
+    c.filter.particles = 200;
+    c.guidance.entropy_particles = 200;
+    c.guidance.entropy_particles_concentrated = Some(30);
+    let world = c.world();
+    let quarter = 0.5
+        * world
+            .footprint
+            .half_width_m
+            .min(world.footprint.half_height_m);
+    let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
+    let mut rng = CoreRng::seed_from_u64(4);
+    let mut planner = EerPlanner::new(c.eer_params());
+    let tight = lab_filter(&c, Some(0.9 * quarter));
+    let n = planner
+        .prepare(&tight, &mut model, &world, &mut rng)
+        .unwrap()
+        .current
+        .len();
+    assert_eq!(n, 30);
+    let spread = lab_filter(&c, None);
+    let n = planner
+        .prepare(&spread, &mut model, &world, &mut rng)
+        .unwrap()
+        .current
+        .len();
+    assert_eq!(n, 200);
+    // Absent, the key means entropy_particles always.
+    c.guidance.entropy_particles_concentrated = None;
+    let mut planner = EerPlanner::new(c.eer_params());
+    let n = planner
+        .prepare(&tight, &mut model, &world, &mut rng)
+        .unwrap()
+        .current
+        .len();
+    assert_eq!(n, 200);
+}
