@@ -545,7 +545,7 @@ fn mock_autopilot(a: MockArgs) -> Result<()> {
     cfg.estimator_ready_after_s = a.estimator_ready_after;
     cfg.seed = a.seed;
     if a.response == "sitl" {
-        cfg.response = infotrack::mock::vehicle::Response::sitl(flavor);
+        cfg.answer_as_sitl();
     }
     if let Some(path) = &a.params {
         let table = infotrack::mock::params::ParamTable::defaults(flavor);

@@ -772,9 +772,12 @@ async fn a_vehicle_that_hovers_without_settling_still_begins_tracking() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn arming_waits_for_a_vehicle_that_becomes_ready() {
-    // ArduCopter refuses to arm for ~40 s after boot; the daemon retries until it may.
+    // ArduCopter refuses to arm for ~40 s after boot, and resets the GUIDED set during its
+    // first 2.2 s to STABILIZE (the SITL build did): the daemon retries until it may, flies
+    // in GUIDED, and reports the reset apart from the failsafes.
     let mut mc = MockConfig::new(Flavor::ArduPilot);
     mc.estimator_ready_after_s = 6.0;
+    mc.startup_s = 2.2;
     let (mock, port) = udp_mock(mc).await;
     let mut cfg = lab();
     cfg.daemon.vehicle = format!("udpout:127.0.0.1:{port}");
@@ -783,4 +786,13 @@ async fn arming_waits_for_a_vehicle_that_becomes_ready() {
         .expect("arming succeeds once the vehicle is ready");
     assert!(!r.output.records.is_empty());
     assert!(mock.with(|m| m.armed()));
+    assert_eq!(
+        r.mode_changes_before_arming,
+        vec![(Mode::Guided, Mode::Stabilized)]
+    );
+    assert!(
+        r.unexpected_mode_changes.is_empty(),
+        "{:?}",
+        r.unexpected_mode_changes
+    );
 }

@@ -417,8 +417,16 @@ pub struct VehicleState {
     pub landed: Option<(Instant, MavLandedState)>,
     /// SYS_STATUS battery voltage (V) and when.
     pub battery_v: Option<(Instant, f64)>,
-    /// Mode changes the link did not ask for (failsafes), newest last.
+    /// Mode changes the link did not ask for once the vehicle had armed (failsafes, the
+    /// pilot, a GCS), newest last.
     pub unexpected_mode_changes: Vec<(Mode, Mode)>,
+    /// Mode changes the link did not ask for before the vehicle first armed: ArduCopter
+    /// takes a mode set while it starts up and resets it to STABILIZE when its start-up
+    /// completes ("ArduPilot Ready"; seen on the SITL build), a pilot choosing a mode on the
+    /// ground. Reported apart from the failsafes.
+    pub mode_changes_before_arming: Vec<(Mode, Mode)>,
+    /// The vehicle has reported itself armed at least once.
+    pub has_armed: bool,
     /// The mode the link last asked for.
     pub commanded_mode: Option<Mode>,
     /// No heartbeat for the configured timeout (cleared by the next one).
@@ -1241,6 +1249,7 @@ fn on_message(
             s.armed = hb
                 .base_mode
                 .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            s.has_armed |= s.armed;
             let mode = Mode::from_custom_mode(flavor, hb.custom_mode);
             if let Some(old) = s.mode {
                 if old != mode {
@@ -1249,11 +1258,16 @@ fn on_message(
                     let commanded = s.commanded_mode == Some(mode);
                     if commanded {
                         s.commanded_mode = None;
-                    } else {
+                    } else if s.has_armed {
                         tracing::warn!(
                             "vehicle changed mode {old:?} -> {mode:?} by itself (failsafe?)"
                         );
                         s.unexpected_mode_changes.push((old, mode));
+                    } else {
+                        tracing::info!(
+                            "vehicle changed mode {old:?} -> {mode:?} by itself before arming (its start-up, or the pilot on the ground)"
+                        );
+                        s.mode_changes_before_arming.push((old, mode));
                     }
                     let _ = events.send(LinkEvent::ModeChanged {
                         from: old,

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 
+use infotrack::autopilot::modes::Mode;
 use infotrack::config::Config;
 use infotrack::daemon::{self, flight_log, DaemonReport, RunOptions};
 use infotrack::report;
@@ -104,19 +105,27 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
     let final_mode = r
         .final_mode
         .map_or_else(|| "an unknown mode".to_string(), |m| m.to_string());
-    let failsafes = if r.unexpected_mode_changes.is_empty() {
+    let list = |v: &[(Mode, Mode)]| {
+        v.iter()
+            .map(|(a, b)| format!("{a} -> {b}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut failsafes = if r.unexpected_mode_changes.is_empty() {
         "no mode change that infotrack did not command".to_string()
     } else {
-        let changes: Vec<String> = r
-            .unexpected_mode_changes
-            .iter()
-            .map(|(a, b)| format!("{a} -> {b}"))
-            .collect();
         format!(
             "mode changes infotrack did not command (a failsafe, the pilot or a GCS): {}",
-            changes.join(", ")
+            list(&r.unexpected_mode_changes)
         )
     };
+    if !r.mode_changes_before_arming.is_empty() {
+        let _ = write!(
+            failsafes,
+            " (before arming the vehicle changed mode by itself: {}; ArduCopter resets a mode set during its start-up)",
+            list(&r.mode_changes_before_arming)
+        );
+    }
     let _ = writeln!(
         t,
         "vehicle: ended in {final_mode}; {failsafes}; link lost {} time(s); {} setpoint(s) refused by the geofence; {} filter period(s) without a camera frame",

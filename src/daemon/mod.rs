@@ -243,8 +243,10 @@ pub struct DaemonReport {
     pub stopped_by: StopReason,
     /// The vehicle's mode after the clean stop.
     pub final_mode: Option<Mode>,
-    /// Mode changes the vehicle made by itself (failsafes).
+    /// Mode changes the vehicle made by itself once armed (failsafes, the pilot, a GCS).
     pub unexpected_mode_changes: Vec<(Mode, Mode)>,
+    /// Mode changes the vehicle made by itself before it first armed (its start-up).
+    pub mode_changes_before_arming: Vec<(Mode, Mode)>,
     /// Times the link lost the vehicle's heartbeat.
     pub link_losses: u32,
     /// Setpoints refused by the geofence check.
@@ -273,7 +275,7 @@ async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String)
     let mut mc = MockConfig::new(flavor);
     mc.seed = cfg.seed;
     if cfg.daemon.mock_response == crate::config::MockResponse::Sitl {
-        mc.response = crate::mock::vehicle::Response::sitl(flavor);
+        mc.answer_as_sitl();
     }
     let a = &cfg.agent;
     mc.param_overrides = match flavor {
@@ -1076,6 +1078,7 @@ async fn stop(
         stopped_by: tracked.stopped_by,
         final_mode: state.mode,
         unexpected_mode_changes: state.unexpected_mode_changes.clone(),
+        mode_changes_before_arming: state.mode_changes_before_arming.clone(),
         link_losses: tracked.link_losses,
         geofence_refusals: tracked.geofence_refusals,
         flavor: vehicle.flavor,

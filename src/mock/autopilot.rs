@@ -41,6 +41,11 @@ pub struct MockConfig {
     pub origin_alt_m: f64,
     /// Seconds after boot before the estimator has a position (arming refused before).
     pub estimator_ready_after_s: f64,
+    /// ArduPilot: seconds after boot until its start-up completes ("ArduPilot Ready",
+    /// ~2.2 s on the ArduCopter SITL build). Before, a mode change is accepted but reset
+    /// to STABILIZE when the start-up completes, as ArduCopter does, and arming is refused
+    /// ("Arm: System not initialised"). 0: ready at boot. PX4 ignores it.
+    pub startup_s: f64,
     /// Parameter overrides applied over the flavour's defaults.
     pub param_overrides: Vec<(String, f64)>,
     /// An RC transmitter is on with its throttle centred. Without one (a companion-only
@@ -60,7 +65,19 @@ pub struct MockConfig {
     pub seed: u64,
 }
 
+/// ArduCopter SITL said "ArduPilot Ready" 2.2 s after its first heartbeat (session 14).
+const ARDUCOPTER_SITL_STARTUP_S: f64 = 2.2;
+
 impl MockConfig {
+    /// Answers as the flavour's SITL build did: its measured position loop
+    /// ([`Response::sitl`]) and, for ArduPilot, its 2.2 s start-up.
+    pub fn answer_as_sitl(&mut self) {
+        self.response = Response::sitl(self.flavor);
+        if self.flavor == Flavor::ArduPilot {
+            self.startup_s = ARDUCOPTER_SITL_STARTUP_S;
+        }
+    }
+
     /// Defaults for a flavour: system 1, component 1, an origin in Gainesville, estimator
     /// ready at once.
     pub fn new(flavor: Flavor) -> Self {
@@ -72,6 +89,7 @@ impl MockConfig {
             origin_lon_deg: -82.3549,
             origin_alt_m: 30.0,
             estimator_ready_after_s: 0.0,
+            startup_s: 0.0,
             param_overrides: Vec::new(),
             rc_throttle_centred: false,
             hover_wander_m: 0.0,
@@ -125,6 +143,8 @@ pub struct MockAutopilot {
     intervals: BTreeMap<u32, f64>,
     next_due: BTreeMap<u32, f64>,
     boot_s: f64,
+    /// ArduPilot's start-up has completed (`MockConfig::startup_s`).
+    started_up: bool,
     now_s: f64,
     /// Time the kinematics were last advanced to.
     last_tick_s: f64,
@@ -203,6 +223,7 @@ impl MockAutopilot {
             intervals,
             next_due: BTreeMap::new(),
             boot_s: now_s,
+            started_up: cfg.flavor != Flavor::ArduPilot || cfg.startup_s <= 0.0,
             now_s,
             last_tick_s: now_s,
             home_ned_m: [0.0; 3],
@@ -288,6 +309,18 @@ impl MockAutopilot {
                 max_tilt_rad: (self.params.get("ANGLE_MAX", 3000.0) / 100.0).to_radians(),
             },
         }
+    }
+
+    /// ArduCopter's start-up completing: it says so and sets its initial mode, STABILIZE,
+    /// over whatever mode was set during the start-up (the SITL build took GUIDED at 1.2 s
+    /// and reported STABILIZE again at 2.2 s, with "ArduPilot Ready").
+    fn complete_startup(&mut self, out: &mut Vec<MavMessage>) {
+        if self.started_up || self.now_s - self.boot_s < self.cfg.startup_s {
+            return;
+        }
+        self.started_up = true;
+        self.set_mode_internal(Mode::Stabilized);
+        out.push(self.statustext(MavSeverity::MAV_SEVERITY_INFO, "ArduPilot Ready"));
     }
 
     fn estimator_ready(&self) -> bool {
@@ -592,6 +625,12 @@ impl MockAutopilot {
                 if c.param1 == 1.0 {
                     if self.armed {
                         MAV_RESULT_ACCEPTED
+                    } else if !self.started_up {
+                        out.push(self.statustext(
+                            MavSeverity::MAV_SEVERITY_CRITICAL,
+                            "Arm: System not initialised",
+                        ));
+                        MAV_RESULT_FAILED
                     } else if !self.estimator_ready() {
                         out.push(self.statustext(
                             MavSeverity::MAV_SEVERITY_CRITICAL,
@@ -788,6 +827,7 @@ impl MockAutopilot {
         self.last_tick_s = now_s;
         self.now_s = self.now_s.max(now_s);
         let mut out = Vec::new();
+        self.complete_startup(&mut out);
         if self.armed {
             // PX4 offboard loss.
             if self.cfg.flavor == Flavor::Px4

@@ -113,6 +113,28 @@ fn arming_is_refused_until_the_estimator_is_ready() {
 }
 
 #[test]
+fn ardupilot_resets_a_mode_set_during_its_startup_and_refuses_to_arm_before() {
+    let mut cfg = MockConfig::new(Flavor::ArduPilot);
+    cfg.startup_s = 2.2;
+    let mut m = MockAutopilot::new(cfg, 0.0);
+    m.tick(0.5);
+    assert_eq!(m.mode(), Mode::Stabilized);
+    set_mode(&mut m, 1.0, Mode::Guided);
+    assert_eq!(m.mode(), Mode::Guided);
+    assert_eq!(arm(&mut m, 1.1), MavResult::MAV_RESULT_FAILED);
+    let said = m.tick(2.3);
+    assert_eq!(m.mode(), Mode::Stabilized);
+    assert!(said.iter().any(
+        |msg| matches!(msg, MavMessage::STATUSTEXT(t) if t.text.starts_with(b"ArduPilot Ready"))
+    ));
+    // Once started a mode sticks and arming goes on to the estimator's checks.
+    set_mode(&mut m, 2.5, Mode::Guided);
+    m.tick(5.0);
+    assert_eq!(m.mode(), Mode::Guided);
+    assert_eq!(arm(&mut m, 5.0), MavResult::MAV_RESULT_ACCEPTED);
+}
+
+#[test]
 fn px4_offboard_loss_switches_to_the_configured_action_and_back() {
     let mut cfg = MockConfig::new(Flavor::Px4);
     cfg.param_overrides = vec![("COM_OBL_RC_ACT".into(), 5.0)];
