@@ -366,10 +366,16 @@ impl EerPlanner {
         rng: &mut R,
     ) -> Result<&EerInputs, MotionError> {
         let n = pf.weights().len();
-        let n_h = if belief_is_concentrated(pf, world) {
-            self.params.entropy_particles_concentrated
+        let (all, concentrated) = (
+            self.params.entropy_particles,
+            self.params.entropy_particles_concentrated,
+        );
+        // The belief's covariance is only worth its pass over the particles when the two
+        // counts differ (unset in the config, they are equal).
+        let n_h = if concentrated != all && belief_is_concentrated(pf, world) {
+            concentrated
         } else {
-            self.params.entropy_particles
+            all
         };
         self.indices.clear();
         if n_h >= n {

@@ -229,16 +229,23 @@ fn lab_filter(c: &Config, radius_m: Option<f64>) -> ParticleFilter {
     pf
 }
 
+/// A quarter of the footprint's smaller side, m: a belief within a disc of 0.9 times this
+/// (standard deviation per axis: half the radius) is concentrated.
+fn quarter_view_m(world: &World) -> f64 {
+    0.5 * world
+        .footprint
+        .half_width_m
+        .min(world.footprint.half_height_m)
+}
+
 #[test]
 fn a_belief_inside_one_view_is_concentrated_and_a_spread_one_is_not() {
     let mut c = Config::default_lab();
     c.filter.particles = 200;
     let world = c.world();
     let fp = world.footprint;
-    let quarter = 0.5 * fp.half_width_m.min(fp.half_height_m);
-    // Within a disc of radius r the standard deviation per axis is r / 2.
     assert!(belief_is_concentrated(
-        &lab_filter(&c, Some(0.9 * quarter)),
+        &lab_filter(&c, Some(0.9 * quarter_view_m(&world))),
         &world
     ));
     assert!(!belief_is_concentrated(
@@ -255,35 +262,22 @@ fn a_concentrated_belief_is_planned_with_the_concentrated_hypothesis_count() {
     c.guidance.entropy_particles = 200;
     c.guidance.entropy_particles_concentrated = Some(30);
     let world = c.world();
-    let quarter = 0.5
-        * world
-            .footprint
-            .half_width_m
-            .min(world.footprint.half_height_m);
     let mut model = ConstantVelocity::new(0.7, c.filter_dt_s());
     let mut rng = CoreRng::seed_from_u64(4);
-    let mut planner = EerPlanner::new(c.eer_params());
-    let tight = lab_filter(&c, Some(0.9 * quarter));
-    let n = planner
-        .prepare(&tight, &mut model, &world, &mut rng)
-        .unwrap()
-        .current
-        .len();
-    assert_eq!(n, 30);
+    let mut hypotheses = |planner: &mut EerPlanner, pf: &ParticleFilter| {
+        planner
+            .prepare(pf, &mut model, &world, &mut rng)
+            .unwrap()
+            .current
+            .len()
+    };
+    let tight = lab_filter(&c, Some(0.9 * quarter_view_m(&world)));
     let spread = lab_filter(&c, None);
-    let n = planner
-        .prepare(&spread, &mut model, &world, &mut rng)
-        .unwrap()
-        .current
-        .len();
-    assert_eq!(n, 200);
+    let mut planner = EerPlanner::new(c.eer_params());
+    assert_eq!(hypotheses(&mut planner, &tight), 30);
+    assert_eq!(hypotheses(&mut planner, &spread), 200);
     // Absent, the key means entropy_particles always.
     c.guidance.entropy_particles_concentrated = None;
     let mut planner = EerPlanner::new(c.eer_params());
-    let n = planner
-        .prepare(&tight, &mut model, &world, &mut rng)
-        .unwrap()
-        .current
-        .len();
-    assert_eq!(n, 200);
+    assert_eq!(hypotheses(&mut planner, &tight), 200);
 }
