@@ -24,6 +24,13 @@ pub enum FilterError {
     Motion(#[from] MotionError),
 }
 
+/// Filter steps over which a track's heading is read for the road constraint.
+const HEADING_STEPS: usize = 3;
+
+/// How much farther than the nearest road a track driving a one-way road the wrong way
+/// counts, in road sigmas (2: its weight falls by e^-2 a step against a track on the road).
+const WRONG_WAY_SIGMAS: f64 = 2.0;
+
 /// The filter's parameters (the configuration assembles them).
 #[derive(Debug, Clone)]
 pub struct FilterParams {
@@ -441,7 +448,9 @@ impl ParticleFilter {
             }
             self.recent.push_back((self.step_index, z));
         }
-        self.update(measurement, agent_enu, world);
+        // A model that knows the roads drives its tracks their allowed way already.
+        let headings = !model.knows_the_roads();
+        self.update(measurement, agent_enu, world, headings);
 
         let action = if !self.normalize() {
             self.counters.recoveries += 1;
@@ -548,11 +557,57 @@ impl ParticleFilter {
         Ok(nonfinite)
     }
 
-    fn update(&mut self, measurement: Option<Enu2>, agent_enu: &Enu2, world: &World) {
+    /// The distance the road constraint weighs particle `i` by: to the nearest road, or,
+    /// for a track that clearly heads somewhere (its last `steps` steps longer than twice
+    /// the process noise's random walk over them, `noise_m`), to the nearest road it may drive that way, at most
+    /// [`WRONG_WAY_SIGMAS`] road sigmas farther than the nearest road. An undirected
+    /// distance keeps alive a constant-velocity track that drives on through a junction
+    /// along a one-way road the wrong way (field-eight's crossing: every straight-on track
+    /// ran up the one-way road in, and the belief never left it). `steps == 0`: the nearest
+    /// road, whatever the heading.
+    fn road_distance(
+        &self,
+        i: usize,
+        world: &World,
+        sigma: f64,
+        steps: usize,
+        noise_m: f64,
+    ) -> f64 {
+        let p = self.histories.newest(i);
+        if steps == 0 {
+            return world.road.distance_to_roads(&p);
+        }
+        let moved = p - self.histories.at(i, self.params.history_len - 1 - steps);
+        // A NaN step (never expected: predictions are checked) reads as no heading.
+        let heads_somewhere = moved.norm() > 2.0 * noise_m;
+        if !heads_somewhere {
+            return world.road.distance_to_roads(&p);
+        }
+        let (any, along) = world.road.distances_to_roads(&p, &moved.normalize());
+        along.min(any + WRONG_WAY_SIGMAS * sigma)
+    }
+
+    /// Weighs the predicted particles: the road constraint (with the tracks' headings
+    /// when `headings`, see [`Self::road_distance`]), then the measurement or its absence.
+    fn update(
+        &mut self,
+        measurement: Option<Enu2>,
+        agent_enu: &Enu2,
+        world: &World,
+        headings: bool,
+    ) {
         if let Some(sigma) = self.params.road_sigma_m {
             let k = -0.5 / (sigma * sigma);
+            let steps = if headings {
+                HEADING_STEPS.min(self.params.history_len.saturating_sub(1))
+            } else {
+                0
+            };
+            // The per-step noise is N(0, 2Q) (`process_noise`): a random walk over the steps.
+            let per_step_m2 = self.params.process_noise.cov.symmetric_eigenvalues().max();
+            let noise_m = (per_step_m2 * steps as f64).sqrt();
             for i in 0..self.weights.len() {
-                let d = world.road.distance_to_roads(&self.histories.newest(i));
+                let d = self.road_distance(i, world, sigma, steps, noise_m);
                 self.weights[i] *= (k * d * d).exp();
             }
         }

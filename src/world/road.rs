@@ -94,17 +94,22 @@ impl RoadNetwork {
     pub fn distance_to_roads(&self, p: &Enu2) -> f64 {
         self.segments
             .iter()
-            .map(|(a, b)| {
-                let d = b - a;
-                let len2 = d.dot(&d);
-                let t = if len2 > 0.0 {
-                    ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                (a + d * t - p).norm()
-            })
+            .map(|(a, b)| distance_to_segment(p, a, b))
             .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Distances from `p` to the nearest road, and to the nearest road one may drive in
+    /// the direction `heading` (a unit vector, world ENU): an edge whose allowed direction
+    /// lies within [`ALONG_HEADING_COS`] of it. m; infinite where there is none.
+    pub fn distances_to_roads(&self, p: &Enu2, heading: &Enu2) -> (f64, f64) {
+        self.segments
+            .iter()
+            .fold((f64::INFINITY, f64::INFINITY), |(any, along), (a, b)| {
+                let d = distance_to_segment(p, a, b);
+                let len = (b - a).norm();
+                let agrees = len > 0.0 && (b - a).dot(heading) >= ALONG_HEADING_COS * len;
+                (any.min(d), if agrees { along.min(d) } else { along })
+            })
     }
 
     /// Samples the node after `from` by its transition probabilities.
@@ -327,6 +332,22 @@ impl RoadNetwork {
     }
 }
 
+/// Distance from `p` to the segment a-b, m.
+fn distance_to_segment(p: &Enu2, a: &Enu2, b: &Enu2) -> f64 {
+    let d = b - a;
+    let len2 = d.dot(&d);
+    let t = if len2 > 0.0 {
+        ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a + d * t - p).norm()
+}
+
+/// The cosine within which a heading drives along a road's allowed direction (60 degrees:
+/// a track's heading scatters with the process noise, and lags a bend).
+pub const ALONG_HEADING_COS: f64 = 0.5;
+
 /// Road segments (each in its edge's direction), each with a weight per metre, and their
 /// total weighted length.
 #[derive(Debug, Clone)]
@@ -409,6 +430,31 @@ mod tests {
         )
         .unwrap();
         RoadNetwork::from_config(&cfg.road)
+    }
+
+    #[test]
+    fn the_road_one_may_drive_a_heading_is_told_from_the_nearest_road() {
+        // Outdoor: 0 (0,0) -> 1 (600,0) is one-way east; 6 <-> 1 runs both ways on x = 600.
+        let road = outdoor_road();
+        let p = Enu2::new(300.0, 2.0);
+        let (any, east) = road.distances_to_roads(&p, &Enu2::new(1.0, 0.0));
+        assert!(
+            (any - 2.0).abs() < 1e-9 && (east - 2.0).abs() < 1e-9,
+            "{any} {east}"
+        );
+        // Westward, the nearest road one may drive that way is elsewhere (farther).
+        let (any, west) = road.distances_to_roads(&p, &Enu2::new(-1.0, 0.0));
+        assert!((any - 2.0).abs() < 1e-9 && west > 100.0, "{any} {west}");
+        // Within 60 degrees of the road's direction counts as along it; beyond, not.
+        let h = |deg: f64| Enu2::new(deg.to_radians().cos(), deg.to_radians().sin());
+        assert!(road.distances_to_roads(&p, &h(55.0)).1 < 3.0);
+        assert!(road.distances_to_roads(&p, &h(65.0)).1 > 100.0);
+        // A two-way road is along either way.
+        let q = Enu2::new(601.0, 200.0);
+        for dir in [Enu2::new(0.0, 1.0), Enu2::new(0.0, -1.0)] {
+            let (any, along) = road.distances_to_roads(&q, &dir);
+            assert!((any - 1.0).abs() < 1e-9 && (along - 1.0).abs() < 1e-9);
+        }
     }
 
     #[test]

@@ -328,3 +328,74 @@ fn road_followers_take_the_branches_only_at_a_junction() {
     pf.inject_road_followers(&world, 300, &mut rng);
     assert!((0..n).all(|i| pf.particle(i) == before[i]));
 }
+
+/// Outdoor's road 0 -> 1 (y = 0, x 0..600) is one-way east. Particles at x = 300 on it:
+/// a third driving east at 10 m/s, a third west at 10 m/s, a third creeping west at
+/// 0.3 m/s (a step well inside the process noise).
+fn one_way_road_tracks() -> (Config, World, ParticleFilter) {
+    let c = Config::from_toml_str(
+        include_str!("../../../config/outdoor.toml"),
+        std::path::Path::new("config/outdoor.toml"),
+    )
+    .unwrap();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(8);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let n = pf.weights().len();
+    let k = c.filter.history_len;
+    let dt = c.filter_dt_s();
+    let mut h = Histories::new(n, k);
+    for i in 0..n {
+        let speed_east = [10.0, -10.0, -0.3][i % 3];
+        let tr = h.track_mut(i);
+        for t in 0..k {
+            tr[2 * t] = 300.0 - (k - 1 - t) as f64 * speed_east * dt;
+            tr[2 * t + 1] = 0.0;
+        }
+    }
+    pf.histories = h;
+    pf.set_weights(&vec![1.0; n]);
+    (c, world, pf)
+}
+
+/// The mean weight of each third of [`one_way_road_tracks`] after one update with no
+/// detection and nothing in view (`headings`: the motion model does not know the roads).
+fn weights_by_track(pf: &mut ParticleFilter, world: &World, headings: bool) -> [f64; 3] {
+    // Far from the road: the footprint holds no particle, only the road constraint acts.
+    pf.update(None, &Enu2::new(1300.0, 900.0), world, headings);
+    let (mut sums, mut counts) = ([0.0; 3], [0.0; 3]);
+    for (i, w) in pf.weights().iter().enumerate() {
+        sums[i % 3] += w;
+        counts[i % 3] += 1.0;
+    }
+    [0, 1, 2].map(|k| sums[k] / counts[k])
+}
+
+#[test]
+fn a_track_driving_a_one_way_road_the_wrong_way_fades() {
+    let (c, world, mut pf) = one_way_road_tracks();
+    let [east, west, creeping] = weights_by_track(&mut pf, &world, true);
+    // On the road, the right way: untouched by the constraint (distance 0).
+    assert!(
+        east > 0.0 && (creeping - east).abs() < 1e-9 * east,
+        "{east} {creeping}"
+    );
+    // The wrong way: as if two road sigmas off the road, e^-2 of the others.
+    let expected = (-2.0f64).exp();
+    assert!(
+        (west / east - expected).abs() < 1e-9,
+        "west/east {} (expected {expected})",
+        west / east
+    );
+    // For a model that knows the roads (the DMMN), the nearest road whatever the heading.
+    let (_, world, mut pf) = one_way_road_tracks();
+    let [east, west, creeping] = weights_by_track(&mut pf, &world, false);
+    assert_eq!((east, west), (creeping, creeping));
+    // Without a road constraint nothing is weighed at all.
+    let mut params = c.filter_params();
+    params.road_sigma_m = None;
+    let (_, world, mut pf) = one_way_road_tracks();
+    pf.params = params;
+    let [east, west, creeping] = weights_by_track(&mut pf, &world, true);
+    assert_eq!((east, west), (creeping, creeping));
+}
