@@ -398,7 +398,10 @@ pub struct FilterConfig {
     pub max_outside_fraction: f64,
     /// How far from a road the target can be, metres (one sigma of the road constraint on
     /// the particles); default: three times the measurement noise's largest sigma. 0 turns
-    /// the constraint off.
+    /// the constraint off. With a motion model that does not know the roads (constant
+    /// velocity), a track that clearly heads somewhere is measured to the nearest road it
+    /// may drive that way, at most two sigmas more than to the nearest road (a track
+    /// driving a one-way road the wrong way fades).
     #[serde(default)]
     pub road_sigma_m: Option<f64>,
     /// Share of the particles replaced, at each step without a measurement, by hypotheses
