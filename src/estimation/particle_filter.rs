@@ -558,25 +558,24 @@ impl ParticleFilter {
     }
 
     /// The distance the road constraint weighs particle `i` by: to the nearest road, or,
-    /// for a track that clearly heads somewhere (its last `steps` steps longer than twice
-    /// the process noise's random walk over them, `noise_m`), to the nearest road it may drive that way, at most
-    /// [`WRONG_WAY_SIGMAS`] road sigmas farther than the nearest road. An undirected
-    /// distance keeps alive a constant-velocity track that drives on through a junction
-    /// along a one-way road the wrong way (field-eight's crossing: every straight-on track
-    /// ran up the one-way road in, and the belief never left it). `steps == 0`: the nearest
-    /// road, whatever the heading.
+    /// with `heading` (steps, noise) and for a track that clearly heads somewhere (its last
+    /// `steps` steps longer than twice the process noise's random walk over them), to the
+    /// nearest road it may drive that way, at most [`WRONG_WAY_SIGMAS`] road sigmas farther
+    /// than the nearest road. An undirected distance keeps alive a constant-velocity track
+    /// that drives on through a junction along a one-way road the wrong way (field-eight's
+    /// crossing: every straight-on track ran up the one-way road in, and the belief never
+    /// left it).
     fn road_distance(
         &self,
         i: usize,
         world: &World,
         sigma: f64,
-        steps: usize,
-        noise_m: f64,
+        heading: Option<(usize, f64)>,
     ) -> f64 {
         let p = self.histories.newest(i);
-        if steps == 0 {
+        let Some((steps, noise_m)) = heading else {
             return world.road.distance_to_roads(&p);
-        }
+        };
         let moved = p - self.histories.at(i, self.params.history_len - 1 - steps);
         // A NaN step (never expected: predictions are checked) reads as no heading.
         let heads_somewhere = moved.norm() > 2.0 * noise_m;
@@ -585,6 +584,18 @@ impl ParticleFilter {
         }
         let (any, along) = world.road.distances_to_roads(&p, &moved.normalize());
         along.min(any + WRONG_WAY_SIGMAS * sigma)
+    }
+
+    /// The steps a track's heading is read over and the process noise's random walk over
+    /// them (m), when headings are read and the history is long enough.
+    fn heading_check(&self, headings: bool) -> Option<(usize, f64)> {
+        let steps = HEADING_STEPS.min(self.params.history_len.saturating_sub(1));
+        if !headings || steps == 0 {
+            return None;
+        }
+        // The per-step noise is N(0, 2Q) (`process_noise`): a random walk over the steps.
+        let per_step_m2 = self.params.process_noise.cov.symmetric_eigenvalues().max();
+        Some((steps, (per_step_m2 * steps as f64).sqrt()))
     }
 
     /// Weighs the predicted particles: the road constraint (with the tracks' headings
@@ -598,16 +609,9 @@ impl ParticleFilter {
     ) {
         if let Some(sigma) = self.params.road_sigma_m {
             let k = -0.5 / (sigma * sigma);
-            let steps = if headings {
-                HEADING_STEPS.min(self.params.history_len.saturating_sub(1))
-            } else {
-                0
-            };
-            // The per-step noise is N(0, 2Q) (`process_noise`): a random walk over the steps.
-            let per_step_m2 = self.params.process_noise.cov.symmetric_eigenvalues().max();
-            let noise_m = (per_step_m2 * steps as f64).sqrt();
+            let heading = self.heading_check(headings);
             for i in 0..self.weights.len() {
-                let d = self.road_distance(i, world, sigma, steps, noise_m);
+                let d = self.road_distance(i, world, sigma, heading);
                 self.weights[i] *= (k * d * d).exp();
             }
         }

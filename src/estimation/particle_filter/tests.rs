@@ -15,6 +15,15 @@ fn setup(n: usize) -> (Config, World, ParticleFilter, CoreRng) {
     (c, world, pf, rng)
 }
 
+/// The outdoor world's config (`config/outdoor.toml`).
+fn outdoor() -> Config {
+    Config::from_toml_str(
+        include_str!("../../../config/outdoor.toml"),
+        std::path::Path::new("config/outdoor.toml"),
+    )
+    .unwrap()
+}
+
 fn mass_inside(pf: &ParticleFilter, world: &World, agent: &Enu2) -> f64 {
     (0..pf.weights().len())
         .filter(|&i| world.is_visible(agent, &pf.particle(i)))
@@ -279,11 +288,7 @@ fn a_blind_step_predicts_without_negative_information() {
 fn road_followers_take_the_branches_only_at_a_junction() {
     // Outdoor world: every particle 2 m before node 1 (600, 0) driving east at 10 m/s;
     // one step (3.3 m) takes them through the junction: clones go east (0.6) or north (0.4).
-    let c = Config::from_toml_str(
-        include_str!("../../../config/outdoor.toml"),
-        std::path::Path::new("config/outdoor.toml"),
-    )
-    .unwrap();
+    let c = outdoor();
     let world = c.world();
     let mut rng = CoreRng::seed_from_u64(5);
     let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
@@ -333,11 +338,7 @@ fn road_followers_take_the_branches_only_at_a_junction() {
 /// a third driving east at 10 m/s, a third west at 10 m/s, a third creeping west at
 /// 0.3 m/s (a step well inside the process noise).
 fn one_way_road_tracks() -> (Config, World, ParticleFilter) {
-    let c = Config::from_toml_str(
-        include_str!("../../../config/outdoor.toml"),
-        std::path::Path::new("config/outdoor.toml"),
-    )
-    .unwrap();
+    let c = outdoor();
     let world = c.world();
     let mut rng = CoreRng::seed_from_u64(8);
     let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
