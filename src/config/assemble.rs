@@ -1,9 +1,9 @@
 //! The configuration assembles each core component's own parameters: the core never sees
 //! the application's `Config`.
 
-use super::Config;
+use super::{Config, SpeedLimitShape};
 use crate::estimation::{FilterParams, KalmanParams};
-use crate::guidance::{EerParams, GuidanceKind};
+use crate::guidance::{EerParams, GuidanceKind, ReachShape};
 use crate::motion::MotionParams;
 use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams};
 use crate::world::camera::Footprint;
@@ -97,6 +97,10 @@ impl Config {
             horizon_steps: g.horizon_steps,
             grid_side: g.candidate_grid_side,
             reach_m: self.agent.speed_limit_mps * g.horizon_steps as f64 * self.filter_dt_s(),
+            reach_shape: match self.agent.speed_limit_shape {
+                SpeedLimitShape::PerAxis => ReachShape::Square,
+                SpeedLimitShape::Norm => ReachShape::Disc,
+            },
             kernel: Gaussian2::new(g.entropy_kernel_cov_m2),
             miss_probability: self.filter.miss_probability,
             process_noise: twice(self.filter.process_noise_cov_m2),

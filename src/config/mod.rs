@@ -334,12 +334,32 @@ pub struct AgentConfig {
     pub start_enu_m: [f64; 2],
     /// Proportional gain from position error to velocity command, 1/s.
     pub gain_per_s: f64,
-    /// Speed limit per axis, m/s.
+    /// Horizontal speed limit, m/s: the simulator's agent applies it as
+    /// `speed_limit_shape` says; in the closed loop it is the autopilot's own limit
+    /// (MPC_XY_VEL_MAX, WPNAV_SPEED), which bounds the speed's norm.
     pub speed_limit_mps: f64,
     /// Acceleration limit (norm), m/s^2.
     pub accel_limit_mps2: f64,
     /// Position errors below this are treated as zero, metres.
     pub dead_zone_m: f64,
+    /// How the simulator's agent limits its speed: `per_axis` (each of east and north
+    /// within the limit, the paper's lab agent: a diagonal flies 1.41x faster and a
+    /// saturated command turns toward the diagonal) or `norm` (the speed itself, as PX4 and
+    /// ArduCopter do). Optional; `per_axis` when absent. EER's reachable candidates follow
+    /// it: a square of half width `reach` for `per_axis`, a disc of that radius for `norm`.
+    #[serde(default)]
+    pub speed_limit_shape: SpeedLimitShape,
+}
+
+/// How the simulator's agent limits its horizontal speed (`agent.speed_limit_shape`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SpeedLimitShape {
+    /// Each axis within the limit (the paper's lab agent).
+    #[default]
+    PerAxis,
+    /// The speed's norm within the limit (the autopilots).
+    Norm,
 }
 
 /// The downward-looking camera.

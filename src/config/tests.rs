@@ -279,3 +279,29 @@ fn relative_paths_resolve_from_the_config_file() {
     let ring = Config::load(&root.join("config/field-ring.toml")).unwrap();
     assert_eq!(ring.motion.dmmn_model, Path::new("models/dmmn.onnx"));
 }
+
+/// `agent.speed_limit_shape` is optional (absent: the paper's per-axis agent and a square
+/// reach), `norm` gives the autopilots' limit and a disc of reach, and a misspelt value is
+/// an error naming the value and what is accepted.
+#[test]
+fn the_agent_speed_limit_shape_is_optional_and_a_bad_one_is_named() {
+    use crate::guidance::ReachShape;
+    let c = Config::default_lab();
+    assert_eq!(c.agent.speed_limit_shape, SpeedLimitShape::PerAxis);
+    assert_eq!(c.eer_params().reach_shape, ReachShape::Square);
+    let norm = load_modified(|t| {
+        tbl(t, "agent").insert("speed_limit_shape".into(), "norm".into());
+    })
+    .unwrap();
+    assert_eq!(norm.agent.speed_limit_shape, SpeedLimitShape::Norm);
+    assert_eq!(norm.eer_params().reach_shape, ReachShape::Disc);
+    let msg = load_modified(|t| {
+        tbl(t, "agent").insert("speed_limit_shape".into(), "round".into());
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(
+        msg.contains("round") && msg.contains("per_axis") && msg.contains("norm"),
+        "{msg}"
+    );
+}

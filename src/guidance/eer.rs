@@ -50,8 +50,11 @@ pub struct EerParams {
     pub horizon_steps: usize,
     /// Reachable-candidate grid side.
     pub grid_side: usize,
-    /// Half width of the square the agent can reach in K filter steps, metres.
+    /// How far the agent can fly in K filter steps, metres: the half width of a square or
+    /// the radius of a disc, as `reach_shape` says.
     pub reach_m: f64,
+    /// The shape of the reachable region: the agent's speed limit's.
+    pub reach_shape: ReachShape,
     /// Transition kernel of the entropy formulas.
     pub kernel: Gaussian2,
     /// p(no detection | in view).
@@ -90,12 +93,36 @@ pub struct EerDecision {
     pub candidates: usize,
 }
 
+/// The region the agent can reach within the horizon, as its speed limit shapes it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ReachShape {
+    /// A square of half width `reach` (a speed limit per axis: the paper's lab agent).
+    #[default]
+    Square,
+    /// A disc of radius `reach` (a limit on the speed's norm: PX4, ArduCopter).
+    Disc,
+}
+
+impl ReachShape {
+    /// The farthest point of the region from its centre, in units of `reach`: a waypoint
+    /// beyond it can only be a far predicted particle, not a reachable candidate.
+    pub fn farthest_in_reaches(self) -> f64 {
+        match self {
+            ReachShape::Square => std::f64::consts::SQRT_2,
+            ReachShape::Disc => 1.0,
+        }
+    }
+}
+
 /// Candidate waypoints: the predicted particles plus a grid of the points reachable within
-/// K steps around the agent, all clamped to the geofence.
+/// K steps around the agent, all clamped to the geofence. For a disc, the grid's points
+/// outside it are moved onto its rim along their direction, so the rim's directions stay
+/// candidates.
 pub fn candidates(
     inputs: &EerInputs,
     agent_enu: &Enu2,
     reach_m: f64,
+    reach_shape: ReachShape,
     grid_side: usize,
     world: &World,
 ) -> Vec<Enu2> {
@@ -118,8 +145,11 @@ pub fn candidates(
     };
     for iy in 0..grid_side {
         for ix in 0..grid_side {
-            let p = origin + Enu2::new(ix as f64 * step, iy as f64 * step);
-            out.push(world.workspace_enu.clamp(&p));
+            let mut offset = origin + Enu2::new(ix as f64 * step, iy as f64 * step) - agent_enu;
+            if reach_shape == ReachShape::Disc && offset.norm() > reach_m {
+                offset *= reach_m / offset.norm();
+            }
+            out.push(world.workspace_enu.clamp(&(agent_enu + offset)));
         }
     }
     out
@@ -432,6 +462,7 @@ impl EerPlanner {
             &self.inputs,
             agent_enu,
             self.params.reach_m,
+            self.params.reach_shape,
             self.params.grid_side,
             world,
         );

@@ -15,7 +15,7 @@ pub mod lawn;
 use std::fmt;
 use std::str::FromStr;
 
-pub use eer::{EerDecision, EerParams, EerPlanner};
+pub use eer::{EerDecision, EerParams, EerPlanner, ReachShape};
 pub use lawn::{LawnConfig, LawnmowerPath};
 
 /// A guidance law.

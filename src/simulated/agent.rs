@@ -1,7 +1,8 @@
 //! The simulated agent: a multicopter at fixed altitude following position setpoints with a
-//! proportional velocity controller, per-axis speed limit and an acceleration limit.
+//! proportional velocity controller, a speed limit (per axis or on the norm, as configured)
+//! and an acceleration limit.
 
-use crate::config::AgentConfig;
+use crate::config::{AgentConfig, SpeedLimitShape};
 use crate::world::geometry::Enu2;
 
 /// Agent state in the world ENU frame (horizontal; altitude is fixed).
@@ -35,8 +36,11 @@ impl AgentSim {
         } else {
             err * p.gain_per_s
         };
-        let v_cmd =
-            (v_p + feed_forward_enu).map(|v| v.clamp(-p.speed_limit_mps, p.speed_limit_mps));
+        let v_cmd = limit_speed(
+            v_p + feed_forward_enu,
+            p.speed_limit_mps,
+            p.speed_limit_shape,
+        );
         let mut dv = v_cmd - self.velocity_enu;
         let max_dv = p.accel_limit_mps2 * dt_s;
         if dv.norm() > max_dv {
@@ -44,6 +48,22 @@ impl AgentSim {
         }
         self.velocity_enu += dv;
         self.position_enu += self.velocity_enu * dt_s;
+    }
+}
+
+/// The commanded velocity within the speed limit: per axis (the paper's lab agent), or
+/// scaled down along its own direction (PX4 and ArduCopter).
+fn limit_speed(v_enu: Enu2, limit_mps: f64, shape: SpeedLimitShape) -> Enu2 {
+    match shape {
+        SpeedLimitShape::PerAxis => v_enu.map(|v| v.clamp(-limit_mps, limit_mps)),
+        SpeedLimitShape::Norm => {
+            let speed = v_enu.norm();
+            if speed > limit_mps {
+                v_enu * (limit_mps / speed)
+            } else {
+                v_enu
+            }
+        }
     }
 }
 
@@ -93,5 +113,47 @@ mod tests {
         );
         // (What remains is one physics step of motion: the setpoint moves before the agent.)
         assert!(lag(true) < 10.0 / 30.0 + 0.05, "{}", lag(true));
+    }
+
+    /// A saturated diagonal command: per axis, both components reach the limit (1.41x the
+    /// speed, the paper's lab agent); on the norm the speed is the limit and the command's
+    /// direction is kept (PX4, ArduCopter). Both ways, an off-diagonal command.
+    #[test]
+    fn the_speed_limit_applies_per_axis_or_on_the_norm_as_configured() {
+        let v = Enu2::new(30.0, 10.0);
+        let per_axis = limit_speed(v, 15.0, SpeedLimitShape::PerAxis);
+        assert_eq!(per_axis, Enu2::new(15.0, 10.0));
+        let norm = limit_speed(v, 15.0, SpeedLimitShape::Norm);
+        assert!((norm.norm() - 15.0).abs() < 1e-9, "{norm}");
+        assert!((norm.y / norm.x - 10.0 / 30.0).abs() < 1e-12, "{norm}");
+        // Within the limit, neither changes the command.
+        let slow = Enu2::new(-3.0, 4.0);
+        assert_eq!(limit_speed(slow, 15.0, SpeedLimitShape::Norm), slow);
+        assert_eq!(limit_speed(slow, 15.0, SpeedLimitShape::PerAxis), slow);
+    }
+
+    /// An agent limited on the norm flies a long diagonal leg at the limit and straight at
+    /// its goal (per axis it would fly 1.41x faster, along the diagonal).
+    #[test]
+    fn a_norm_limited_agent_flies_straight_at_the_limit() {
+        let mut c = Config::default_lab();
+        c.agent.speed_limit_mps = 10.0;
+        c.agent.accel_limit_mps2 = 5.0;
+        c.agent.speed_limit_shape = SpeedLimitShape::Norm;
+        let mut a = AgentSim::new(c.agent.clone());
+        let start = a.position_enu;
+        let goal = start + Enu2::new(400.0, 100.0);
+        let dt = 0.1;
+        for _ in 0..200 {
+            a.step(&goal, &Enu2::zeros(), dt);
+            assert!(a.velocity_enu.norm() <= 10.0 + 1e-9);
+            let off = a.position_enu - start;
+            // On the line from the start to the goal (cross product ~ 0).
+            assert!(
+                (off.x * 100.0 - off.y * 400.0).abs() / 412.3 < 1e-6,
+                "{off}"
+            );
+        }
+        assert!((a.velocity_enu.norm() - 10.0).abs() < 1e-9);
     }
 }

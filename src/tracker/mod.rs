@@ -25,7 +25,7 @@ pub use schedule::{Due, Rates, Schedule};
 
 use crate::estimation::{FilterError, FilterParams, KalmanFilter, KalmanParams, ParticleFilter};
 use crate::frames::Enu2;
-use crate::guidance::{EerParams, EerPlanner, GuidanceKind, LawnConfig, LawnmowerPath};
+use crate::guidance::{EerParams, EerPlanner, GuidanceKind, LawnConfig, LawnmowerPath, ReachShape};
 use crate::metrics::StepRecord;
 use crate::motion::{self, MotionError, MotionParams};
 use crate::rng::CoreRng;
@@ -665,6 +665,7 @@ impl Tracker {
                 &d.waypoint_enu,
                 horizon_s,
                 self.params.eer.reach_m,
+                self.params.eer.reach_shape,
             )
         } else {
             over_target_velocity_enu
@@ -676,8 +677,9 @@ impl Tracker {
     }
 }
 
-/// The planned motion toward a waypoint beyond every candidate of the reachable grid (its
-/// corners lie at sqrt(2) x reach, so this is a far predicted particle) while the belief is
+/// The planned motion toward a waypoint beyond every candidate of the reachable region (a
+/// square's corners lie at sqrt(2) x reach, a disc's rim at reach; beyond them a waypoint is
+/// a far predicted particle) while the belief is
 /// spread out: the agent's top speed along the way, so that the setpoint (`reach` short of
 /// the waypoint, moving to it) carries the transit's speed as feed-forward instead of
 /// trailing it by speed / position gain. Otherwise zero, a fixed point, which arrives
@@ -690,13 +692,14 @@ fn approach_velocity(
     waypoint_enu: &Enu2,
     horizon_s: f64,
     reach_m: f64,
+    reach_shape: ReachShape,
 ) -> Enu2 {
     let to_go = waypoint_enu - vehicle_enu;
     let distance = to_go.norm();
-    // The tolerance keeps the grid's own corners (at exactly sqrt(2) x reach before
-    // rounding) on the fixed-point side.
-    let grid_corner_m = std::f64::consts::SQRT_2 * reach_m + 1e-9;
-    if distance <= grid_corner_m || horizon_s <= 0.0 {
+    // The tolerance keeps the region's own farthest candidates (a square's corners, a
+    // disc's rim, exactly there before rounding) on the fixed-point side.
+    let farthest_candidate_m = reach_shape.farthest_in_reaches() * reach_m + 1e-9;
+    if distance <= farthest_candidate_m || horizon_s <= 0.0 {
         return Enu2::zeros();
     }
     to_go * (reach_m / distance / horizon_s)

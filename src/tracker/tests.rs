@@ -280,14 +280,62 @@ fn eer_over_a_concentrated_belief_moves_with_the_target() {
 /// fixed point, as before.
 #[test]
 fn a_far_waypoint_is_approached_at_top_speed_and_a_near_one_is_a_fixed_point() {
-    let v = super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(300.0, 400.0), 2.0, 30.0);
+    let v = super::approach_velocity(
+        &Enu2::new(0.0, 0.0),
+        &Enu2::new(300.0, 400.0),
+        2.0,
+        30.0,
+        ReachShape::Square,
+    );
     assert!((v.norm() - 15.0).abs() < 1e-9, "{v}");
     assert!((v.x / v.norm() - 0.6).abs() < 1e-9 && (v.y / v.norm() - 0.8).abs() < 1e-9);
-    let near = super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(20.0, 0.0), 2.0, 30.0);
+    let near = super::approach_velocity(
+        &Enu2::new(0.0, 0.0),
+        &Enu2::new(20.0, 0.0),
+        2.0,
+        30.0,
+        ReachShape::Square,
+    );
     assert_eq!(near, Enu2::zeros());
-    let corner = super::approach_velocity(&Enu2::new(5.0, 5.0), &Enu2::new(35.0, 35.0), 2.0, 30.0);
+    let corner = super::approach_velocity(
+        &Enu2::new(5.0, 5.0),
+        &Enu2::new(35.0, 35.0),
+        2.0,
+        30.0,
+        ReachShape::Square,
+    );
     assert_eq!(corner, Enu2::zeros(), "the grid's corner is a fixed point");
-    let just_beyond =
-        super::approach_velocity(&Enu2::new(0.0, 0.0), &Enu2::new(43.0, 0.0), 2.0, 30.0);
+    let just_beyond = super::approach_velocity(
+        &Enu2::new(0.0, 0.0),
+        &Enu2::new(43.0, 0.0),
+        2.0,
+        30.0,
+        ReachShape::Square,
+    );
     assert!((just_beyond.norm() - 15.0).abs() < 1e-9, "{just_beyond}");
+}
+
+/// With a disc of reach (a speed limit on the norm) the farthest candidate is on the rim:
+/// a waypoint just beyond it, diagonal or not, is approached at top speed; one on it is a
+/// fixed point.
+#[test]
+fn with_a_disc_of_reach_a_waypoint_beyond_the_rim_is_approached_at_top_speed() {
+    let disc =
+        |to: Enu2| super::approach_velocity(&Enu2::zeros(), &to, 2.0, 30.0, ReachShape::Disc);
+    assert_eq!(
+        disc(Enu2::new(30.0, 0.0)),
+        Enu2::zeros(),
+        "the rim is a fixed point"
+    );
+    let diagonal = disc(Enu2::new(22.0, 22.0));
+    assert!((diagonal.norm() - 15.0).abs() < 1e-9, "{diagonal}");
+    // The same diagonal point is inside the square's reach.
+    let square = super::approach_velocity(
+        &Enu2::zeros(),
+        &Enu2::new(22.0, 22.0),
+        2.0,
+        30.0,
+        ReachShape::Square,
+    );
+    assert_eq!(square, Enu2::zeros());
 }

@@ -47,7 +47,7 @@ fn fast_eer_equals_reference_on_random_inputs() {
     {
         let inp = random_inputs(&mut rng, n, n_m, &world);
         let agent = Enu2::new(-0.5, 0.4);
-        let cands = candidates(&inp, &agent, 1.2, 5, &world);
+        let cands = candidates(&inp, &agent, 1.2, ReachShape::Square, 5, &world);
         let mut scratch = EerScratch::default();
         let (h_fast, fast) = evaluate_fast(&inp, &cands, &world, &kernel, p_miss, &mut scratch);
         let (h_ref, reference) = evaluate_reference(&inp, &cands, &world, &kernel, p_miss);
@@ -280,4 +280,23 @@ fn a_concentrated_belief_is_planned_with_the_concentrated_hypothesis_count() {
     c.guidance.entropy_particles_concentrated = None;
     let mut planner = EerPlanner::new(c.eer_params());
     assert_eq!(hypotheses(&mut planner, &tight), 200);
+}
+
+/// A disc of reach keeps every grid candidate within the reach of the agent, with the rim's
+/// diagonal directions still among them; a square's corners are sqrt(2) x reach away.
+#[test]
+fn a_disc_of_reach_keeps_the_grid_within_reach() {
+    let c = Config::default_lab();
+    let world = c.world();
+    let inp = EerInputs::default();
+    let agent = Enu2::new(0.0, 0.0);
+    let reach = 0.5;
+    let far = |cands: &[Enu2]| cands.iter().map(|p| (p - agent).norm()).fold(0.0, f64::max);
+    let disc = candidates(&inp, &agent, reach, ReachShape::Disc, 5, &world);
+    let square = candidates(&inp, &agent, reach, ReachShape::Square, 5, &world);
+    assert_eq!(disc.len(), 25);
+    assert!((far(&disc) - reach).abs() < 1e-12, "{}", far(&disc));
+    assert!((far(&square) - std::f64::consts::SQRT_2 * reach).abs() < 1e-12);
+    let diagonal = Enu2::new(reach, reach) / std::f64::consts::SQRT_2;
+    assert!(disc.iter().any(|p| (p - diagonal).norm() < 1e-12));
 }
