@@ -9,7 +9,7 @@ use crate::config::Config;
 use crate::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
 use crate::vision::detector::{AprilTagDetector, RoiPx, RoiSearch, SearchOutcome};
 use crate::vision::projection::{measure_tag, ProjectionNoise};
-use crate::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
+use crate::vision::render::{RenderOptions, RenderedFrame, SceneEnu, TargetAppearance};
 use crate::vision::tag_family::TagBitmap;
 use crate::vision::VisionError;
 use crate::world::geometry::{Enu2, PolygonEnu};
@@ -112,9 +112,7 @@ impl VisionSensor {
             occluders: self.occluders.clone(),
             ground_seed: 17,
         };
-        let t0 = std::time::Instant::now();
-        let img = render(&self.cam, &pose, &scene, &self.opts, frame_seed);
-        self.last_render_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let mut frame = RenderedFrame::new(&self.cam, &pose, &scene, &self.opts, frame_seed);
         self.stats.frames += 1;
         let side_px = self.tag_size_m * self.cam.intrinsics.fx_px / self.altitude_m;
         let px_per_m = self.cam.intrinsics.fx_px / self.altitude_m;
@@ -125,9 +123,13 @@ impl VisionSensor {
                 .in_image(px)
                 .then(|| RoiPx::around(px, side_px, sigma_m * px_per_m))
         });
-        let (dets, how) = self
+        // The camera renders only what the search looks at: the region of interest, and the
+        // whole frame only when the region holds no tag (the same pixels either way).
+        let found = self
             .search
-            .detect(&img, roi, &[self.tag.id], Some(side_px))?;
+            .detect_in(&mut frame, roi, &[self.tag.id], Some(side_px));
+        self.last_render_ms = frame.render_ms;
+        let (dets, how) = found?;
         let Some(d) = dets.first() else {
             return Ok(None);
         };

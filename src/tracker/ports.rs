@@ -23,7 +23,7 @@ pub struct TickInput {
     pub truth_velocity_enu: Enu2,
 }
 
-/// The filter's belief before a measurement: where a sensor should look first.
+/// The filter's belief predicted to the next frame's time: where a sensor should look first.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Prior {
     /// Mean, world ENU.

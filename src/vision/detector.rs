@@ -10,7 +10,7 @@
 use crate::vision::InvalidSetting;
 use serde::{Deserialize, Serialize};
 
-use super::image::GrayImage;
+use super::image::{FrameSource, GrayImage};
 use super::VisionError;
 
 /// One detected tag, in OpenCV's pixel convention (pixel centres at integers).
@@ -299,12 +299,25 @@ impl<D: TagDetector> RoiSearch<D> {
         target_ids: &[u32],
         tag_side_px: Option<f64>,
     ) -> Result<(Vec<TagDetection>, SearchOutcome), VisionError> {
+        self.detect_in(&mut &*image, roi, target_ids, tag_side_px)
+    }
+
+    /// [`Self::detect`] on a frame that makes its pixels where asked: the full frame is
+    /// asked for only when the region of interest holds no target tag.
+    pub fn detect_in(
+        &mut self,
+        frame: &mut impl FrameSource,
+        roi: Option<RoiPx>,
+        target_ids: &[u32],
+        tag_side_px: Option<f64>,
+    ) -> Result<(Vec<TagDetection>, SearchOutcome), VisionError> {
         let wanted = |d: &TagDetection| target_ids.is_empty() || target_ids.contains(&d.id);
         let coarse = tag_side_px
             .map(|side| (side / MIN_DECIMATED_TAG_SIDE_PX).floor() as f32)
             .unwrap_or(1.0)
             .min(self.max_full_frame_decimation);
-        let roi = roi.filter(|r| 2.0 * r.half_px <= self.max_roi_fraction * image.width as f64);
+        let (width, height) = frame.size();
+        let roi = roi.filter(|r| 2.0 * r.half_px <= self.max_roi_fraction * width as f64);
         if let Some(RoiPx {
             center_px: c,
             half_px: half,
@@ -312,10 +325,10 @@ impl<D: TagDetector> RoiSearch<D> {
         {
             let x0 = (c[0] - half).floor().max(0.0);
             let y0 = (c[1] - half).floor().max(0.0);
-            let x1 = (c[0] + half).ceil().min(image.width as f64);
-            let y1 = (c[1] + half).ceil().min(image.height as f64);
+            let x1 = (c[0] + half).ceil().min(width as f64);
+            let y1 = (c[1] + half).ceil().min(height as f64);
             if x1 - x0 >= 16.0 && y1 - y0 >= 16.0 {
-                let crop = image.crop(
+                let crop = frame.crop(
                     x0 as usize,
                     y0 as usize,
                     (x1 - x0) as usize,
@@ -333,7 +346,7 @@ impl<D: TagDetector> RoiSearch<D> {
             }
         }
         let found = self
-            .search(image, coarse)?
+            .search(frame.full(), coarse)?
             .into_iter()
             .filter(wanted)
             .collect();

@@ -41,18 +41,96 @@ impl GrayImage {
 
     /// The rectangle `[x0, x0 + w) x [y0, y0 + h)`, clipped to the image.
     pub fn crop(&self, x0: usize, y0: usize, w: usize, h: usize) -> Self {
-        let x1 = (x0 + w).min(self.width);
-        let y1 = (y0 + h).min(self.height);
-        let (x0, y0) = (x0.min(x1), y0.min(y1));
-        let mut data = Vec::with_capacity((x1 - x0) * (y1 - y0));
-        for y in y0..y1 {
-            data.extend_from_slice(&self.data[y * self.width + x0..y * self.width + x1]);
+        let r = PixelRect::clipped(x0, y0, w, h, self.width, self.height);
+        let mut data = Vec::with_capacity(r.width() * r.height());
+        for y in r.y0..r.y1 {
+            data.extend_from_slice(&self.data[y * self.width + r.x0..y * self.width + r.x1]);
         }
         Self {
-            width: x1 - x0,
-            height: y1 - y0,
+            width: r.width(),
+            height: r.height(),
             data,
         }
+    }
+}
+
+/// A rectangle of pixels `[x0, x1) x [y0, y1)`, image coordinates (x right, y down).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PixelRect {
+    /// First column.
+    pub x0: usize,
+    /// First row.
+    pub y0: usize,
+    /// One past the last column.
+    pub x1: usize,
+    /// One past the last row.
+    pub y1: usize,
+}
+
+impl PixelRect {
+    /// The whole of a `width` x `height` image.
+    pub fn full(width: usize, height: usize) -> Self {
+        Self {
+            x0: 0,
+            y0: 0,
+            x1: width,
+            y1: height,
+        }
+    }
+
+    /// `[x0, x0 + w) x [y0, y0 + h)` clipped to a `width` x `height` image.
+    pub fn clipped(x0: usize, y0: usize, w: usize, h: usize, width: usize, height: usize) -> Self {
+        let (x1, y1) = ((x0 + w).min(width), (y0 + h).min(height));
+        Self {
+            x0: x0.min(x1),
+            y0: y0.min(y1),
+            x1,
+            y1,
+        }
+    }
+
+    /// Grown by `margin` on every side, within a `width` x `height` image.
+    pub fn grown(&self, margin: usize, width: usize, height: usize) -> Self {
+        Self {
+            x0: self.x0.saturating_sub(margin),
+            y0: self.y0.saturating_sub(margin),
+            x1: (self.x1 + margin).min(width),
+            y1: (self.y1 + margin).min(height),
+        }
+    }
+
+    /// Columns.
+    pub fn width(&self) -> usize {
+        self.x1 - self.x0
+    }
+
+    /// Rows.
+    pub fn height(&self) -> usize {
+        self.y1 - self.y0
+    }
+}
+
+/// Where a detector reads its pixels: a whole frame in memory, or a camera that makes
+/// pixels only where asked (the synthetic camera renders a region of interest without the
+/// rest of the frame). A crop is exactly the same pixels the whole frame has there.
+pub trait FrameSource {
+    /// The frame's size, px.
+    fn size(&self) -> (usize, usize);
+    /// The rectangle `[x0, x0 + w) x [y0, y0 + h)`, clipped to the frame.
+    fn crop(&mut self, x0: usize, y0: usize, w: usize, h: usize) -> GrayImage;
+    /// The whole frame.
+    fn full(&mut self) -> &GrayImage;
+}
+
+impl FrameSource for &GrayImage {
+    fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+    fn crop(&mut self, x0: usize, y0: usize, w: usize, h: usize) -> GrayImage {
+        GrayImage::crop(self, x0, y0, w, h)
+    }
+    fn full(&mut self) -> &GrayImage {
+        self
     }
 }
 

@@ -9,7 +9,7 @@ use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
 use super::camera_model::{CameraModel, VehiclePoseNed};
-use super::image::GrayImage;
+use super::image::{FrameSource, GrayImage, PixelRect};
 use super::tag_family::TagBitmap;
 use crate::rng::CoreRng;
 use crate::world::geometry::{Enu2, PolygonEnu};
@@ -188,8 +188,6 @@ fn ray_sampler<'a>(
 }
 
 /// Renders the camera's view. `noise_seed` drives the sensor noise only.
-// Slightly long: the per-row parallel loop keeps its sampling, noise and blur steps in
-// one place so the pixel pipeline reads top to bottom.
 pub fn render(
     cam: &CameraModel,
     pose: &VehiclePoseNed,
@@ -201,6 +199,31 @@ pub fn render(
         cam.intrinsics.width_px as usize,
         cam.intrinsics.height_px as usize,
     );
+    render_region(cam, pose, scene, opts, noise_seed, PixelRect::full(w, h))
+}
+
+/// Renders the pixels of `region` only: exactly the pixels [`render`] draws there (the
+/// blur's and the anti-aliasing's neighbourhoods and each row's noise stream are taken as
+/// the whole frame has them), at the cost of the region and its margins.
+// Slightly long: the per-row parallel loop keeps its sampling, noise and blur steps in
+// one place so the pixel pipeline reads top to bottom.
+pub fn render_region(
+    cam: &CameraModel,
+    pose: &VehiclePoseNed,
+    scene: &SceneEnu,
+    opts: &RenderOptions,
+    noise_seed: u64,
+    region: PixelRect,
+) -> GrayImage {
+    let (w, h) = (
+        cam.intrinsics.width_px as usize,
+        cam.intrinsics.height_px as usize,
+    );
+    let blur_radius = blur_radius_px(opts.blur_sigma_px);
+    // Before the blur: the region and the blur's reach; whether a pixel is near an edge
+    // looks at its 8 neighbours, whose corners lie one more pixel out.
+    let drawn = region.grown(blur_radius, w, h);
+    let judged = drawn.grown(1, w, h);
     let s = opts.supersample.max(1);
     let offsets: Vec<f64> = (0..s).map(|i| (i as f64 + 0.5) / s as f64 - 0.5).collect();
     let sample = ray_sampler(cam, pose, scene);
@@ -208,11 +231,12 @@ pub fn render(
     // (or whose neighbours' corners) differ is supersampled, a smooth one is the mean of
     // its corners. The dilation catches a tag corner that pokes into a pixel without
     // covering any of its corners.
-    let corners = corner_radiance(cam, pose, scene, w, h, &sample);
-    let corner = |u: usize, v: usize| corners.values[v * (w + 1) + u];
-    let busy: Vec<bool> = (0..w * h)
+    let corners = corner_radiance(cam, pose, scene, w, h, judged, &sample);
+    let corner = |u: usize, v: usize| corners.at(u, v);
+    let jw = judged.width();
+    let busy: Vec<bool> = (0..jw * judged.height())
         .map(|i| {
-            let (u, v) = (i % w, i / w);
+            let (u, v) = (judged.x0 + i % jw, judged.y0 + i / jw);
             // Smooth texture (no edge in the block) is not supersampled however much it
             // varies across a pixel: the mean of its corners is its pixel mean to a fraction
             // of a grey level, and seen from high up every pixel of it varies by more than one.
@@ -231,54 +255,136 @@ pub fn render(
             hi - lo > 1.0
         })
         .collect();
-    let mut img = vec![0f64; w * h];
-    img.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
-        for (u, px) in row.iter_mut().enumerate() {
-            let near_edge = s > 1
-                && (v.saturating_sub(1)..(v + 2).min(h))
-                    .any(|vv| (u.saturating_sub(1)..(u + 2).min(w)).any(|uu| busy[vv * w + uu]));
-            let value = if near_edge {
-                let mut acc = 0.0;
-                for &dv in &offsets {
-                    for &du in &offsets {
-                        acc += sample(u as f64 + du, v as f64 + dv);
+    let is_busy = |u: usize, v: usize| busy[(v - judged.y0) * jw + (u - judged.x0)];
+    let mut img = vec![0f64; drawn.width() * drawn.height()];
+    img.par_chunks_mut(drawn.width())
+        .enumerate()
+        .for_each(|(row_index, row)| {
+            let v = drawn.y0 + row_index;
+            for (k, px) in row.iter_mut().enumerate() {
+                let u = drawn.x0 + k;
+                let near_edge = s > 1
+                    && (v.saturating_sub(1)..(v + 2).min(h))
+                        .any(|vv| (u.saturating_sub(1)..(u + 2).min(w)).any(|uu| is_busy(uu, vv)));
+                let value = if near_edge {
+                    let mut acc = 0.0;
+                    for &dv in &offsets {
+                        for &du in &offsets {
+                            acc += sample(u as f64 + du, v as f64 + dv);
+                        }
                     }
-                }
-                acc / (s * s) as f64
-            } else if s > 1 {
-                (corner(u, v) + corner(u + 1, v) + corner(u, v + 1) + corner(u + 1, v + 1)) / 4.0
-            } else {
-                sample(u as f64, v as f64)
-            };
-            *px = value * opts.gain + opts.offset;
-        }
-    });
-    if opts.blur_sigma_px > 0.0 {
-        img = gaussian_blur(&img, w, h, opts.blur_sigma_px);
-    }
-    let data: Vec<u8> = if opts.noise_sigma > 0.0 {
-        let normal = Normal::new(0.0, opts.noise_sigma).expect("sigma > 0");
-        img.par_chunks(w)
-            .enumerate()
-            .flat_map_iter(|(v, row)| {
-                // One stream per row: the same image whatever the thread count.
-                let mut rng =
-                    CoreRng::seed_from_u64(noise_seed ^ (v as u64).wrapping_mul(0x9E37_79B9));
-                row.iter()
-                    .map(|&x| (x + normal.sample(&mut rng)).round().clamp(0.0, 255.0) as u8)
-                    .collect::<Vec<_>>()
-            })
-            .collect()
+                    acc / (s * s) as f64
+                } else if s > 1 {
+                    (corner(u, v) + corner(u + 1, v) + corner(u, v + 1) + corner(u + 1, v + 1))
+                        / 4.0
+                } else {
+                    sample(u as f64, v as f64)
+                };
+                *px = value * opts.gain + opts.offset;
+            }
+        });
+    let img = if blur_radius > 0 {
+        gaussian_blur(&img, drawn, region, w, h, opts.blur_sigma_px)
     } else {
-        img.iter()
-            .map(|&x| x.round().clamp(0.0, 255.0) as u8)
-            .collect()
+        img
     };
     GrayImage {
-        width: w,
-        height: h,
-        data,
+        width: region.width(),
+        height: region.height(),
+        data: quantise(&img, region, opts.noise_sigma, noise_seed),
     }
+}
+
+/// A synthetic frame rendered where it is looked at: a region of interest costs its own
+/// pixels, the whole frame is rendered only when asked for (and then kept). Every pixel is
+/// the one [`render`] draws there.
+pub struct RenderedFrame<'a> {
+    cam: &'a CameraModel,
+    pose: &'a VehiclePoseNed,
+    scene: &'a SceneEnu,
+    opts: &'a RenderOptions,
+    noise_seed: u64,
+    whole: Option<GrayImage>,
+    /// Time spent rendering so far (wall clock, for reports), ms.
+    pub render_ms: f64,
+}
+
+impl<'a> RenderedFrame<'a> {
+    /// The frame the camera sees from `pose`, nothing rendered yet.
+    pub fn new(
+        cam: &'a CameraModel,
+        pose: &'a VehiclePoseNed,
+        scene: &'a SceneEnu,
+        opts: &'a RenderOptions,
+        noise_seed: u64,
+    ) -> Self {
+        Self {
+            cam,
+            pose,
+            scene,
+            opts,
+            noise_seed,
+            whole: None,
+            render_ms: 0.0,
+        }
+    }
+
+    fn timed<T>(&mut self, f: impl FnOnce(&Self) -> T) -> T {
+        let t0 = std::time::Instant::now();
+        let out = f(self);
+        self.render_ms += t0.elapsed().as_secs_f64() * 1e3;
+        out
+    }
+}
+
+impl FrameSource for RenderedFrame<'_> {
+    fn size(&self) -> (usize, usize) {
+        let i = &self.cam.intrinsics;
+        (i.width_px as usize, i.height_px as usize)
+    }
+
+    fn crop(&mut self, x0: usize, y0: usize, w: usize, h: usize) -> GrayImage {
+        if let Some(whole) = &self.whole {
+            return whole.crop(x0, y0, w, h);
+        }
+        let (width, height) = self.size();
+        let r = PixelRect::clipped(x0, y0, w, h, width, height);
+        self.timed(|f| render_region(f.cam, f.pose, f.scene, f.opts, f.noise_seed, r))
+    }
+
+    fn full(&mut self) -> &GrayImage {
+        if self.whole.is_none() {
+            let img = self.timed(|f| render(f.cam, f.pose, f.scene, f.opts, f.noise_seed));
+            self.whole = Some(img);
+        }
+        self.whole.as_ref().expect("rendered above")
+    }
+}
+
+/// The region's grey levels to 8 bits, with sensor noise drawn from each row's own stream
+/// (seeded by the row, consumed from the frame's first column): the same pixels whatever
+/// the region and the thread count.
+fn quantise(img: &[f64], region: PixelRect, noise_sigma: f64, noise_seed: u64) -> Vec<u8> {
+    let to_u8 = |x: f64| x.round().clamp(0.0, 255.0) as u8;
+    if noise_sigma <= 0.0 {
+        return img.iter().map(|&x| to_u8(x)).collect();
+    }
+    let normal = Normal::new(0.0, noise_sigma).expect("sigma > 0");
+    img.par_chunks(region.width())
+        .enumerate()
+        .flat_map_iter(|(row_index, row)| {
+            let v = region.y0 + row_index;
+            let mut rng = CoreRng::seed_from_u64(noise_seed ^ (v as u64).wrapping_mul(0x9E37_79B9));
+            // The columns left of the region draw their noise too, so that each pixel gets
+            // the draw the whole frame gives it.
+            for _ in 0..region.x0 {
+                let _: f64 = normal.sample(&mut rng);
+            }
+            row.iter()
+                .map(|&x| to_u8(x + normal.sample(&mut rng)))
+                .collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 /// The ground point (world ENU) under a pixel corner and what is there (0 ground, 1 tag,
@@ -288,10 +394,13 @@ type Seen = Option<([f64; 2], u8)>;
 /// Pixels per side of the blocks in which smooth ground is interpolated.
 const BLOCK_PX: usize = 8;
 
-/// The radiance at every pixel corner, and which blocks have an edge in them.
+/// The radiance at the pixel corners of a rectangle of pixels, and which blocks of the
+/// frame have an edge in them.
 struct Corners {
-    /// Radiance, (w + 1) x (h + 1), row-major.
+    /// Radiance at corners `x0..=x1` x `y0..=y1` of the rectangle, row-major.
     values: Vec<f64>,
+    /// The pixels whose corners `values` holds.
+    pixels: PixelRect,
     /// Per block of [`BLOCK_PX`] (row-major, `blocks_x` per row): something has an edge in
     /// it or next to it (an outline, the tag, a change of what is seen, the sky).
     edgy: Vec<bool>,
@@ -303,6 +412,12 @@ struct Corners {
 }
 
 impl Corners {
+    /// Radiance at corner (u, v) (frame coordinates), which must be one of the rectangle's.
+    fn at(&self, u: usize, v: usize) -> f64 {
+        let stride = self.pixels.width() + 1;
+        self.values[(v - self.pixels.y0) * stride + (u - self.pixels.x0)]
+    }
+
     /// Whether pixel (u, v) lies in a block with an edge.
     fn edgy_at(&self, u: usize, v: usize) -> bool {
         self.edgy[(v / BLOCK_PX) * self.blocks_x + (u / BLOCK_PX).min(self.blocks_x - 1)]
@@ -313,8 +428,8 @@ impl Corners {
 /// scale is 0.23 m, over which a bilinear fit of 2 cm errs by ~0.1 grey level.
 const SMOOTH_BLOCK_M: f64 = 0.02;
 
-/// Radiance at every pixel corner ((w + 1) x (h + 1), row-major, corner (u, v) at pixel
-/// coordinates (u - 0.5, v - 0.5)). Exact wherever something has an edge: blocks of
+/// Radiance at the corners of the pixels in `pixels` (corner (u, v) at pixel coordinates
+/// (u - 0.5, v - 0.5)). Exact wherever something has an edge: blocks of
 /// [`BLOCK_PX`] px crossed by an occluder's outline or covering the tag, blocks whose corners
 /// see different things (ground, occluder, tag, sky), and blocks wider than
 /// [`SMOOTH_BLOCK_M`] on the ground (high altitude: every block). Elsewhere the ground is
@@ -330,6 +445,7 @@ fn corner_radiance(
     scene: &SceneEnu,
     w: usize,
     h: usize,
+    pixels: PixelRect,
     sample: &(impl Fn(f64, f64) -> f64 + Sync),
 ) -> Corners {
     let b = BLOCK_PX;
@@ -454,20 +570,27 @@ fn corner_radiance(
     }
     // Every corner of an exact block is evaluated; the others are interpolated within their
     // block (shared edges of smooth blocks agree: both interpolate linearly along them).
-    let mut need = vec![false; (w + 1) * (h + 1)];
+    let (cw, ch) = (pixels.width() + 1, pixels.height() + 1);
+    let mut need = vec![false; cw * ch];
     for (k, _) in exact.iter().enumerate().filter(|(_, e)| **e) {
         let (i, j) = (k % nbx, k / nbx);
-        for v in ys[j]..=ys[j + 1] {
-            need[v * (w + 1) + xs[i]..=v * (w + 1) + xs[i + 1]]
+        let (u0, u1) = (xs[i].max(pixels.x0), xs[i + 1].min(pixels.x1));
+        let (v0, v1) = (ys[j].max(pixels.y0), ys[j + 1].min(pixels.y1));
+        if u0 > u1 || v0 > v1 {
+            continue;
+        }
+        for v in v0..=v1 {
+            let row = (v - pixels.y0) * cw;
+            need[row + u0 - pixels.x0..=row + u1 - pixels.x0]
                 .iter_mut()
                 .for_each(|n| *n = true);
         }
     }
     let interpolated = need.iter().filter(|n| !**n).count();
-    let values = (0..(h + 1) * (w + 1))
+    let values = (0..cw * ch)
         .into_par_iter()
         .map(|idx| {
-            let (u, v) = (idx % (w + 1), idx / (w + 1));
+            let (u, v) = (pixels.x0 + idx % cw, pixels.y0 + idx / cw);
             if need[idx] {
                 return sample(u as f64 - 0.5, v as f64 - 0.5);
             }
@@ -481,256 +604,67 @@ fn corner_radiance(
         .collect();
     Corners {
         values,
+        pixels,
         edgy,
         blocks_x: nbx,
         interpolated,
     }
 }
 
-fn gaussian_blur(img: &[f64], w: usize, h: usize, sigma: f64) -> Vec<f64> {
-    let r = (3.0 * sigma).ceil() as isize;
+/// How far the blur kernel reaches, px (0: no blur).
+fn blur_radius_px(sigma_px: f64) -> usize {
+    if sigma_px > 0.0 {
+        (3.0 * sigma_px).ceil() as usize
+    } else {
+        0
+    }
+}
+
+/// The separable Gaussian blur of the frame, at the pixels of `out` only, from the pixels
+/// of `drawn` (which holds `out` and the kernel's reach around it, within the frame); the
+/// frame's edges are extended as the whole frame's blur extends them.
+fn gaussian_blur(
+    img: &[f64],
+    drawn: PixelRect,
+    out: PixelRect,
+    w: usize,
+    h: usize,
+    sigma: f64,
+) -> Vec<f64> {
+    let r = blur_radius_px(sigma) as isize;
     let k: Vec<f64> = (-r..=r)
         .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
         .collect();
     let norm: f64 = k.iter().sum();
     let k: Vec<f64> = k.iter().map(|x| x / norm).collect();
     let clamp = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
-    let mut tmp = vec![0.0; w * h];
-    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            *out = (-r..=r)
-                .map(|i| k[(i + r) as usize] * img[y * w + clamp(x as isize + i, w)])
-                .sum();
-        }
-    });
-    let mut out = vec![0.0; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, o) in row.iter_mut().enumerate() {
+    let dw = drawn.width();
+    let ow = out.width();
+    // Along rows, for every drawn row, at the output's columns.
+    let mut tmp = vec![0.0; ow * drawn.height()];
+    tmp.par_chunks_mut(ow).enumerate().for_each(|(row, line)| {
+        for (c, o) in line.iter_mut().enumerate() {
+            let x = (out.x0 + c) as isize;
             *o = (-r..=r)
-                .map(|i| k[(i + r) as usize] * tmp[clamp(y as isize + i, h) * w + x])
+                .map(|i| k[(i + r) as usize] * img[row * dw + clamp(x + i, w) - drawn.x0])
                 .sum();
         }
     });
-    out
+    // Along columns, at the output's rows.
+    let mut blurred = vec![0.0; ow * out.height()];
+    blurred
+        .par_chunks_mut(ow)
+        .enumerate()
+        .for_each(|(row, line)| {
+            let y = (out.y0 + row) as isize;
+            for (c, o) in line.iter_mut().enumerate() {
+                *o = (-r..=r)
+                    .map(|i| k[(i + r) as usize] * tmp[(clamp(y + i, h) - drawn.y0) * ow + c])
+                    .sum();
+            }
+        });
+    blurred
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::vision::camera_model::{CameraMount, Intrinsics};
-
-    fn scene() -> SceneEnu {
-        SceneEnu {
-            target: Some(TargetAppearance {
-                position_enu_m: [1.0, 2.0],
-                heading_enu_rad: 0.4,
-                tag: TagBitmap::tag36h11(3).unwrap(),
-                tag_size_m: 0.5,
-            }),
-            occluders: vec![],
-            ground_seed: 9,
-        }
-    }
-
-    fn pose() -> VehiclePoseNed {
-        VehiclePoseNed {
-            position_ned_m: [2.0, 1.0, -5.0],
-            roll_rad: 0.0,
-            pitch_rad: 0.0,
-            yaw_rad: 0.0,
-        }
-    }
-
-    #[test]
-    fn the_inlined_floor_is_floor() {
-        for x in [
-            -3.5,
-            -3.0,
-            -2.999_999,
-            -0.5,
-            -1e-300,
-            -0.0,
-            0.0,
-            1e-300,
-            0.5,
-            2.0,
-            2.5,
-            1e15 + 0.5,
-            -1e15 - 0.5,
-        ] {
-            assert_eq!(floor_fast(x), x.floor(), "{x}");
-        }
-    }
-
-    /// Seen from 45 m a pixel spans 5 cm of textured ground: without an edge in view it is
-    /// the mean of its corners, which differs from the supersampled mean by under a grey
-    /// level; with the tag in view its pixels are still supersampled.
-    #[test]
-    fn from_high_up_smooth_ground_is_not_supersampled_but_the_tag_is() {
-        // 5 cm pixels at 45 m, as a 1280 px, 70 degree camera has (a narrower view keeps
-        // the test small).
-        let cam = CameraModel {
-            intrinsics: Intrinsics::ideal(320, 180, 2.0 * (320.0 * 0.05 / 2.0 / 45.0f64).atan()),
-            mount: CameraMount::nadir(),
-        };
-        let high = VehiclePoseNed {
-            position_ned_m: [0.0, 0.0, -45.0],
-            ..pose()
-        };
-        let bare = SceneEnu {
-            target: None,
-            ..scene()
-        };
-        let sample = ray_sampler(&cam, &high, &bare);
-        let corners = corner_radiance(&cam, &high, &bare, 320, 180, &sample);
-        assert!(corners.edgy.iter().all(|e| !e), "no edge in a bare field");
-        let img = render(&cam, &high, &bare, &RenderOptions::default(), 0);
-        let mut worst: f64 = 0.0;
-        for v in (0..180).step_by(7) {
-            for u in (0..320).step_by(11) {
-                let mut acc = 0.0;
-                for k in 0..16 {
-                    acc += sample(
-                        u as f64 + (k % 4) as f64 / 4.0 - 0.375,
-                        v as f64 + (k / 4) as f64 / 4.0 - 0.375,
-                    );
-                }
-                worst = worst.max((img.data[v * 320 + u] as f64 - acc / 16.0).abs());
-            }
-        }
-        assert!(
-            worst < 1.6,
-            "worst pixel {worst} grey levels from its 4x4 mean"
-        );
-        let tagged = SceneEnu {
-            target: Some(TargetAppearance {
-                position_enu_m: [0.0, 0.0],
-                tag_size_m: 1.2,
-                ..scene().target.unwrap()
-            }),
-            ..scene()
-        };
-        let sample = ray_sampler(&cam, &high, &tagged);
-        let corners = corner_radiance(&cam, &high, &tagged, 320, 180, &sample);
-        assert!(corners.edgy_at(160, 90), "the tag's block has an edge");
-        assert!(
-            !corners.edgy_at(10, 10),
-            "a far corner of the frame has none"
-        );
-    }
-
-    #[test]
-    fn the_tag_is_drawn_where_the_camera_model_projects_it() {
-        let cam = CameraModel {
-            intrinsics: Intrinsics::ideal(320, 240, 1.0),
-            mount: CameraMount::nadir(),
-        };
-        let sc = scene();
-        let img = render(&cam, &pose(), &sc, &RenderOptions::default(), 0);
-        // The tag centre is the middle of its payload; the ring just inside each corner is
-        // black, the white ring just outside is white.
-        let t = sc.target.as_ref().unwrap();
-        for corner in t.corners_enu() {
-            let inward = [
-                corner[0] + 0.1 * (t.position_enu_m[0] - corner[0]),
-                corner[1] + 0.1 * (t.position_enu_m[1] - corner[1]),
-            ];
-            let outward = [
-                corner[0] - 0.08 * (t.position_enu_m[0] - corner[0]),
-                corner[1] - 0.08 * (t.position_enu_m[1] - corner[1]),
-            ];
-            let pi = cam.world_enu_to_pixel(inward, 0.0, &pose()).unwrap();
-            let po = cam.world_enu_to_pixel(outward, 0.0, &pose()).unwrap();
-            let at = |p: [f64; 2]| img.get(p[0].round() as usize, p[1].round() as usize);
-            assert!(at(pi) < 60, "inside corner {corner:?}: {}", at(pi));
-            assert!(at(po) > 190, "outside corner {corner:?}: {}", at(po));
-        }
-    }
-
-    #[test]
-    fn rendering_is_deterministic_and_occluders_hide_the_tag() {
-        let cam = CameraModel {
-            intrinsics: Intrinsics::ideal(160, 120, 1.0),
-            mount: CameraMount::nadir(),
-        };
-        let opts = RenderOptions {
-            noise_sigma: 3.0,
-            blur_sigma_px: 0.7,
-            ..Default::default()
-        };
-        let a = render(&cam, &pose(), &scene(), &opts, 5);
-        let b = render(&cam, &pose(), &scene(), &opts, 5);
-        let c = render(&cam, &pose(), &scene(), &opts, 6);
-        assert_eq!(a, b);
-        assert_ne!(a, c);
-        let mut hidden = scene();
-        hidden.occluders = vec![PolygonEnu::square(Enu2::new(1.0, 2.0), 2.0)];
-        let img = render(&cam, &pose(), &hidden, &RenderOptions::default(), 0);
-        let p = cam.world_enu_to_pixel([1.0, 2.0], 0.0, &pose()).unwrap();
-        let v = img.get(p[0] as usize, p[1] as usize);
-        assert!((40..=60).contains(&v), "{v}");
-    }
-
-    #[test]
-    fn interpolated_corners_match_exact_ones() {
-        // Low (the lab: blocks interpolated) and high (every block exact), level and tilted,
-        // with an occluder's edge and the tag in view.
-        for (alt, roll, pitch) in [
-            (1.2, 0.0, 0.0),
-            (1.2, 0.15, -0.1),
-            (3.0, 0.0, 0.2),
-            (45.0, 0.1, 0.0),
-        ] {
-            let cam = CameraModel {
-                intrinsics: Intrinsics::ideal(640, 480, 1.0),
-                mount: CameraMount::nadir(),
-            };
-            let pose = VehiclePoseNed {
-                position_ned_m: [0.1, -0.2, -alt],
-                roll_rad: roll,
-                pitch_rad: pitch,
-                yaw_rad: 0.7,
-            };
-            let ground = cam.pixel_to_ground_enu(300.0, 220.0, &pose).unwrap();
-            let edge = cam.pixel_to_ground_enu(500.0, 120.0, &pose).unwrap();
-            let scene = SceneEnu {
-                target: Some(TargetAppearance {
-                    position_enu_m: ground,
-                    heading_enu_rad: 0.4,
-                    tag: TagBitmap::tag36h11(2).unwrap(),
-                    tag_size_m: 0.08 * alt,
-                }),
-                occluders: vec![PolygonEnu::square(Enu2::new(edge[0], edge[1]), 0.3 * alt)],
-                ground_seed: 5,
-            };
-            let sample = ray_sampler(&cam, &pose, &scene);
-            let Corners {
-                values: fast,
-                interpolated,
-                ..
-            } = corner_radiance(&cam, &pose, &scene, 640, 480, &sample);
-            let share = interpolated as f64 / (641.0 * 481.0);
-            eprintln!(
-                "alt {alt} m, roll {roll}, pitch {pitch}: {:.0} % interpolated",
-                100.0 * share
-            );
-            if alt < 2.0 {
-                assert!(share > 0.5, "only {share} interpolated at {alt} m");
-            } else if alt > 40.0 {
-                assert_eq!(interpolated, 0, "blocks span metres at {alt} m: all exact");
-            }
-            let mut worst = 0.0f64;
-            for v in 0..=480 {
-                for u in 0..=640 {
-                    let e = sample(u as f64 - 0.5, v as f64 - 0.5);
-                    worst = worst.max((fast[v * 641 + u] - e).abs());
-                }
-            }
-            eprintln!("  worst corner difference {worst:.4} grey levels");
-            assert!(
-                worst < 0.25,
-                "alt {alt}: corner radiance off by {worst} grey levels"
-            );
-        }
-    }
-}
+mod tests;
