@@ -115,6 +115,66 @@ async fn ardupilot_guided_flight_and_gcs_failsafe() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_takeoff_the_pilot_interrupts_stops_at_once_and_says_why() {
+    for flavor in [Flavor::Px4, Flavor::ArduPilot] {
+        // The pilot takes the vehicle (POSCTL / LOITER) once it climbs: infotrack gives up
+        // the takeoff instead of waiting out its timeout or switching back.
+        let (mock, link) = setup(flavor, 0.0, 1).await;
+        link.request_telemetry().await.unwrap();
+        let takes_it = async {
+            // Once infotrack has seen the climb begin.
+            while link.position_enu().is_none_or(|p| p.z_up_m < 1.0) {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+            mock.with(|m| m.pilot_switch(Mode::Position)).unwrap();
+        };
+        let began = std::time::Instant::now();
+        let (taken_off, ()) = tokio::join!(link.take_off(30.0, Duration::from_secs(60)), takes_it);
+        let err = taken_off.unwrap_err().to_string();
+        assert!(began.elapsed() < Duration::from_secs(10), "{err}");
+        let climb = if flavor == Flavor::Px4 {
+            "OFFBOARD"
+        } else {
+            "GUIDED"
+        };
+        assert!(
+            err.starts_with("takeoff abandoned: the vehicle left")
+                && err.contains(climb)
+                && err.contains("m up"),
+            "{flavor:?}: {err}"
+        );
+        assert_eq!(mock.with(|m| m.mode()), Mode::Position, "{flavor:?}");
+
+        // The arm switch (or an auto-disarm) on the ground, before the vehicle leaves it.
+        let (mock, link) = setup(flavor, 0.0, 1).await;
+        link.request_telemetry().await.unwrap();
+        // A vehicle that does not climb (its climb speed set to 0) stays on the ground.
+        let climb_speed = if flavor == Flavor::Px4 {
+            "MPC_Z_VEL_MAX_UP"
+        } else {
+            "WPNAV_SPEED_UP"
+        };
+        link.param_set(climb_speed, 0.0, ParamType::Real32)
+            .await
+            .unwrap();
+        let disarms = async {
+            // Once infotrack has seen it armed (the heartbeat comes at 1 Hz).
+            while !link.state().armed {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            mock.with(|m| m.pilot_disarm()).unwrap();
+        };
+        let (taken_off, ()) = tokio::join!(link.take_off(30.0, Duration::from_secs(60)), disarms);
+        let err = taken_off.unwrap_err().to_string();
+        assert!(
+            err.starts_with("takeoff abandoned: the vehicle disarmed during the climb to 30 m"),
+            "{flavor:?}: {err}"
+        );
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn thirty_percent_packet_loss_still_completes_the_sequence() {
     for flavor in [Flavor::Px4, Flavor::ArduPilot] {
         let (_mock, link) = setup(flavor, 30.0, 1).await;

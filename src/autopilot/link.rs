@@ -90,6 +90,13 @@ pub enum LinkError {
         /// How long.
         seconds: f64,
     },
+    /// The takeoff stopped before its altitude: the vehicle disarmed or left the climb's
+    /// mode.
+    #[error("takeoff abandoned: {why}")]
+    TakeoffAbandoned {
+        /// What happened, with the vehicle's height, mode and last message.
+        why: String,
+    },
     /// A parameter is not on the vehicle.
     #[error("the vehicle has no parameter {0}")]
     NoSuchParam(String),
@@ -1037,20 +1044,69 @@ impl VehicleLink {
                 .await?;
             }
         }
-        self.wait_for(
-            |s| {
-                s.local_ned
-                    .map(|(_, p, _)| -p.z_down_m >= 0.95 * altitude_m)
-                    .unwrap_or(false)
-            },
-            &format!("altitude {altitude_m} m"),
-            timeout,
-        )
-        .await?;
+        let climb_mode = match self.flavor() {
+            Flavor::Px4 => Mode::Offboard,
+            Flavor::ArduPilot => Mode::Guided,
+        };
+        self.climb_to(altitude_m, climb_mode, timeout).await?;
         if self.flavor() == Flavor::ArduPilot {
             self.set_setpoint(above, 0.0)?;
         }
         Ok(())
+    }
+
+    /// Waits for the climb to 95 % of `altitude_m`. Gives up at once, saying why, when the
+    /// vehicle disarms (its auto-disarm, the pilot's switch, a failsafe) or leaves
+    /// `climb_mode` (the pilot or a GCS took it: never fought); on the timeout the error says
+    /// how high it got, whether it was armed, its mode and its last STATUSTEXT.
+    async fn climb_to(
+        &self,
+        altitude_m: f64,
+        climb_mode: Mode,
+        timeout: Duration,
+    ) -> Result<(), LinkError> {
+        let until = Instant::now() + timeout;
+        let mut texts = self.events();
+        let mut said: Option<String> = None;
+        loop {
+            let s = self.state();
+            let up_m = s.local_ned.map(|(_, p, _)| -p.z_down_m);
+            if up_m.is_some_and(|z| z >= 0.95 * altitude_m) {
+                return Ok(());
+            }
+            latest_text(&mut texts, &mut said);
+            let at = |s: &VehicleState| {
+                let height = up_m.map_or("no local position".into(), |z| format!("{z:.2} m up"));
+                let mode = s.mode.map_or("no mode".into(), |m| m.to_string());
+                let text = said.as_deref().map_or(String::new(), |t| {
+                    format!("; the vehicle's last message: \"{t}\"")
+                });
+                format!("{height}, {mode}{text}")
+            };
+            if !s.armed {
+                return Err(LinkError::TakeoffAbandoned {
+                    why: format!(
+                        "the vehicle disarmed during the climb to {altitude_m} m ({})",
+                        at(&s)
+                    ),
+                });
+            }
+            if s.mode.is_some_and(|m| m != climb_mode) {
+                return Err(LinkError::TakeoffAbandoned {
+                    why: format!(
+                        "the vehicle left {climb_mode} during the climb to {altitude_m} m ({})",
+                        at(&s)
+                    ),
+                });
+            }
+            if Instant::now() > until {
+                return Err(LinkError::Timeout {
+                    what: format!("altitude {altitude_m} m (armed, {})", at(&s)),
+                    seconds: timeout.as_secs_f64(),
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
     }
 
     /// Clean stop: hold position and altitude (PX4 AUTO.LOITER; ArduPilot BRAKE, else

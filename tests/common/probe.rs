@@ -9,7 +9,7 @@
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
-use infotrack::autopilot::link::VehicleLink;
+use infotrack::autopilot::link::{LinkError, VehicleLink};
 use infotrack::frames::{Enu2, PositionEnu};
 
 /// Altitude of the manoeuvres: the lab's, m.
@@ -131,15 +131,27 @@ fn enu(p: [f64; 3]) -> PositionEnu {
 pub async fn fly(link: &VehicleLink, arm_timeout: Duration) -> Response {
     let mut rec = Recorder::default();
     let start = [0.0, 0.0, ALTITUDE_M];
-    // Take off (the link's own sequence for the flavour), sampling all along.
-    {
+    // Take off (the link's own sequence for the flavour), sampling all along. A takeoff the
+    // vehicle abandons on the ground (its auto-disarm) is tried once more, as a pilot
+    // would, and said on the log: the probe measures the flight, not the first arming.
+    for attempt in 1..=2 {
         let takeoff = link.take_off(ALTITUDE_M, arm_timeout);
         tokio::pin!(takeoff);
         let mut tick = tokio::time::interval(SAMPLE);
-        loop {
+        let done = loop {
             tokio::select! {
-                r = &mut takeoff => { r.expect("takeoff"); break; }
+                r = &mut takeoff => break r,
                 _ = tick.tick() => rec.sample(link, Phase::Takeoff, start),
+            }
+        };
+        match done {
+            Err(LinkError::TakeoffAbandoned { why }) if attempt == 1 => {
+                eprintln!("probe: the first takeoff was abandoned ({why}); taking off again");
+                rec.restart_takeoff();
+            }
+            r => {
+                r.expect("takeoff");
+                break;
             }
         }
     }
@@ -180,6 +192,13 @@ struct Recorder {
 }
 
 impl Recorder {
+    /// Forgets an abandoned takeoff's samples: the takeoff's time counts from the arming
+    /// that flew.
+    fn restart_takeoff(&mut self) {
+        self.armed_at = None;
+        self.response.samples.clear();
+    }
+
     fn sample(&mut self, link: &VehicleLink, phase: Phase, setpoint: [f64; 3]) {
         let state = link.state();
         if !state.armed && self.armed_at.is_none() {

@@ -18,6 +18,16 @@ impl MockAutopilot {
         self.target_ned_m = Some([p[0], p[1], -altitude_m]);
     }
 
+    /// The pilot's arm switch to disarmed (or the firmware's own auto-disarm): refused in
+    /// the air, as both firmwares refuse a disarm without the force flag there.
+    pub fn pilot_disarm(&mut self) -> Result<(), String> {
+        if self.state.altitude_m() > 0.2 {
+            return Err("Disarming denied: not landed".into());
+        }
+        self.armed = false;
+        Ok(())
+    }
+
     /// SET_POSITION_TARGET_LOCAL_NED messages received for this vehicle so far.
     pub fn setpoints_received(&self) -> u64 {
         self.setpoints_received
