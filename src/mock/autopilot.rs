@@ -151,6 +151,8 @@ pub struct MockAutopilot {
     home_ned_m: [f64; 3],
     /// When the vehicle armed (its motors' spool-up counts from here).
     armed_at_s: f64,
+    /// When a landing vehicle touched down (it disarms a moment later).
+    touched_down_at_s: Option<f64>,
     /// Climbing out of a takeoff (until the target altitude is first reached).
     taking_off: bool,
     /// The position loop's wander: where the vehicle holds relative to its target, NED, m.
@@ -228,6 +230,7 @@ impl MockAutopilot {
             last_tick_s: now_s,
             home_ned_m: [0.0; 3],
             armed_at_s: now_s,
+            touched_down_at_s: None,
             taking_off: false,
             wander_ned_m: [0.0; 3],
             wander_rng: CoreRng::seed_from_u64(cfg.seed),
@@ -370,6 +373,26 @@ impl MockAutopilot {
         let w = std::f64::consts::TAU * 0.5;
         let (s, c) = (w * self.now_s).sin_cos();
         ([a * s, a * c], [a * w * c, -a * w * s])
+    }
+
+    /// A landing vehicle disarms once it has been on the ground for its land detector's
+    /// delay (PX4's COM_DISARM_LAND, 2 s by default; ArduCopter ~1 s), and it reports
+    /// itself ON_GROUND all that time: a ground station sees "landed" before "disarmed",
+    /// as from the firmwares (MAVSDK reads the landed state when it sees the disarm).
+    fn disarm_after_touchdown(&mut self) {
+        if !(self.armed && self.mode == Mode::Land && self.state.altitude_m() < 0.05) {
+            self.touched_down_at_s = None;
+            return;
+        }
+        let delay_s = match self.cfg.flavor {
+            Flavor::Px4 => self.params.get("COM_DISARM_LAND", 2.0),
+            Flavor::ArduPilot => 1.0,
+        };
+        let since = *self.touched_down_at_s.get_or_insert(self.now_s);
+        if self.now_s - since >= delay_s {
+            self.armed = false;
+            self.touched_down_at_s = None;
+        }
     }
 
     /// ArduCopter's LOITER with the throttle at its minimum (no RC) descends at the
@@ -879,9 +902,7 @@ impl MockAutopilot {
                     self.set_mode_internal(Mode::Land);
                 }
             }
-            if self.mode == Mode::Land && self.state.altitude_m() < 0.05 {
-                self.armed = false;
-            }
+            self.disarm_after_touchdown();
         }
         // Telemetry.
         for id in STREAMED {

@@ -547,3 +547,45 @@ fn commands_with_non_finite_parameters_are_refused_with_the_reason() {
         );
     }
 }
+
+/// A landing vehicle disarms its land detector's delay after touching down (PX4 2 s,
+/// ArduCopter ~1 s), not at the instant: a client that reads the landed state when it sees
+/// the disarm reads ON_GROUND (MAVSDK's own test flight failed on the instant disarm when
+/// the heartbeat overtook EXTENDED_SYS_STATE).
+#[test]
+fn a_landing_vehicle_disarms_a_moment_after_touchdown() {
+    for (flavor, delay_s) in [(Flavor::Px4, 2.0), (Flavor::ArduPilot, 1.0)] {
+        let mut m = MockAutopilot::new(MockConfig::new(flavor), 0.0);
+        let mut t = stream(&mut m, 60.0, 61.5, Some([0.0, 0.0, -3.0]));
+        let flying = if flavor == Flavor::Px4 {
+            Mode::Offboard
+        } else {
+            Mode::Guided
+        };
+        set_mode(&mut m, t, flying);
+        arm(&mut m, t);
+        t = stream(&mut m, t, t + 10.0, Some([0.0, 0.0, -3.0]));
+        assert!(m.position_ned_m()[2] < -2.5, "{flavor:?} did not climb");
+        assert_eq!(
+            set_mode(&mut m, t, Mode::Land),
+            MavResult::MAV_RESULT_ACCEPTED
+        );
+        while m.position_ned_m()[2] < -0.05 && t < 200.0 {
+            t = stream(&mut m, t, t + 0.05, None);
+        }
+        let touchdown = t;
+        assert!(m.armed(), "{flavor:?} disarmed at the touchdown");
+        t = stream(&mut m, t, touchdown + delay_s - 0.3, None);
+        assert!(
+            m.armed(),
+            "{flavor:?} disarmed {:.2} s after touchdown",
+            t - touchdown
+        );
+        stream(&mut m, t, touchdown + delay_s + 0.3, None);
+        assert!(
+            !m.armed(),
+            "{flavor:?} still armed {:.2} s after touchdown",
+            delay_s + 0.3
+        );
+    }
+}
