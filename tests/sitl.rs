@@ -358,12 +358,12 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     // 0.44 m: tracking, loosely). So the bars say that tracking works at all. In view: more
     // often than a drone that never left its start point would see the target (6.7 % of
     // the frames of the lab's target path, 3.9 % from the lab's centre; `sim --closed-loop
-    // --seed 1 --duration 60`'s steps.csv). Estimate: within 0.6 m of the target (0.11-0.44 m
-    // on PX4 SIH); an estimate that stayed at the lab's centre would be 1.04 m off on
-    // average, the target circling the lab.
+    // --seed 1 --duration 60`'s steps.csv). Estimate: within 0.7 m of the target (0.11-0.45 m
+    // on PX4 SIH over seven flights); an estimate that stayed at the lab's centre would be
+    // 1.04 m off on average, the target circling the lab.
     assert!(fov(&f) >= 8.0, "{}", f.stdout);
     let estimation_m = f.summary["estimation_error_m"].as_f64().unwrap();
-    assert!(estimation_m <= 0.6, "{}", f.stdout);
+    assert!(estimation_m <= 0.7, "{}", f.stdout);
     let (mode, dz) = watch_after_stop("udpin:127.0.0.1:14541", 10.0).await;
     assert_eq!(mode, Some(Mode::Hold));
     assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
