@@ -15,4 +15,8 @@ copy="$(mktemp -d)"
 trap 'rm -rf "$copy"' EXIT
 bash scripts/sitl-copy.sh "$src" "$copy"
 echo "SITL suite: PX4 SIH and ArduCopter from $src (copy in $copy)"
+# The SITL builds fly on the wall clock and degrade when the machine is busy (PX4 SIH's
+# lab flight sees the target less often): say how busy it is before they start.
+echo "SITL suite: load average $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores; busiest processes:"
+ps -eo pcpu,etimes,comm --sort=-pcpu | head -6 || true
 INFOTRACK_SITL="$copy" cargo test --release --test sitl -- "${INFOTRACK_SITL_TESTS:-}" --ignored --test-threads=1 --nocapture

@@ -171,4 +171,36 @@ mod tests {
         assert_eq!(s.stats.frames, 4);
         assert_eq!(s.stats.detections, 3);
     }
+
+    /// What skipping a frame without the tag in view rests on (`RenderedFrame::holds_no_tag`):
+    /// the detector finds no tag at all, of any id, in whole field frames of the ground and
+    /// the occluders alone (the outdoor world's 1280 px camera at 45 m, over open road, the
+    /// warehouse and the tree line).
+    #[test]
+    fn the_detector_finds_no_tag_in_field_frames_without_one() {
+        let cfg = Config::load(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/config/outdoor.toml"
+        )))
+        .unwrap();
+        let mut s = VisionSensor::from_config(&cfg).unwrap();
+        let bare = SceneEnu {
+            target: None,
+            occluders: s.occluders.clone(),
+            ground_seed: 17,
+        };
+        let side_px = s.tag_size_m * s.cam.intrinsics.fx_px / s.altitude_m;
+        for (i, (x, y)) in [(300.0, 0.0), (600.0, 0.0), (1200.0, 380.0), (-50.0, 500.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let pose = VehiclePoseNed::level_above(&Enu2::new(x, y), s.altitude_m);
+            let img = crate::vision::render::render(&s.cam, &pose, &bare, &s.opts, i as u64);
+            let (found, _) = s
+                .search
+                .detect_in(&mut &img, None, &[], Some(side_px))
+                .unwrap();
+            assert!(found.is_empty(), "a tag found over ({x}, {y}): {found:?}");
+        }
+    }
 }

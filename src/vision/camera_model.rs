@@ -83,7 +83,8 @@ impl Intrinsics {
         Ok(())
     }
 
-    fn has_distortion(&self) -> bool {
+    /// Whether the lens model bends straight lines (any distortion coefficient set).
+    pub fn has_distortion(&self) -> bool {
         self.distortion.iter().any(|&d| d != 0.0)
     }
 

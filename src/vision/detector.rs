@@ -225,6 +225,9 @@ pub enum SearchOutcome {
     Roi,
     /// In the full frame (no prediction, or the region held no target tag).
     FullFrame,
+    /// Not searched: the frame's source knew that no tag was in it (a synthetic frame; see
+    /// [`FrameSource::holds_no_tag`]).
+    NoTagInFrame,
 }
 
 /// A square region of interest, px (OpenCV convention).
@@ -311,6 +314,12 @@ impl<D: TagDetector> RoiSearch<D> {
         target_ids: &[u32],
         tag_side_px: Option<f64>,
     ) -> Result<(Vec<TagDetection>, SearchOutcome), VisionError> {
+        if frame.holds_no_tag() {
+            // A synthetic frame without the tag in view: the detector finds no tag on its
+            // ground and occluders (tested), and rendering the whole frame to learn that was
+            // most of a lost period's simulated cost.
+            return Ok((Vec::new(), SearchOutcome::NoTagInFrame));
+        }
         let wanted = |d: &TagDetection| target_ids.is_empty() || target_ids.contains(&d.id);
         let coarse = tag_side_px
             .map(|side| (side / MIN_DECIMATED_TAG_SIDE_PX).floor() as f32)

@@ -120,6 +120,11 @@ pub trait FrameSource {
     fn crop(&mut self, x0: usize, y0: usize, w: usize, h: usize) -> GrayImage;
     /// The whole frame.
     fn full(&mut self) -> &GrayImage;
+    /// Whether the source knows that no tag is in the frame (a synthetic frame whose scene
+    /// puts none in view), so that nothing need be searched. A camera never knows: `false`.
+    fn holds_no_tag(&self) -> bool {
+        false
+    }
 }
 
 impl FrameSource for &GrayImage {

@@ -44,13 +44,34 @@ impl TargetAppearance {
         [at(-h, -h), at(h, -h), at(h, h), at(-h, h)]
     }
 
+    /// Half the side of the whole tag, white border included, m.
+    fn half_outer_m(&self) -> f64 {
+        0.5 * self.tag_size_m * self.tag.size as f64 / self.tag.black_cells() as f64
+    }
+
+    /// The radius of the circle around the whole tag, m: no ground point beyond it is on
+    /// the tag ([`Self::sample`] says `None` there).
+    pub fn reach_m(&self) -> f64 {
+        std::f64::consts::SQRT_2 * self.half_outer_m() * (1.0 + 1e-6)
+    }
+
+    /// Whether an occluder covers the square around the whole tag (half side
+    /// [`Self::reach_m`]): its canopy is drawn over every point of the tag, so no pixel shows
+    /// any of it and the renderer treats the scene as one without the target.
+    pub fn hidden_by(&self, occluders: &[PolygonEnu]) -> bool {
+        let [x, y] = self.position_enu_m;
+        let centre = Enu2::new(x, y);
+        occluders
+            .iter()
+            .any(|o| o.contains_square(&centre, self.reach_m()))
+    }
+
     /// Cell value under a world ENU ground point, if it falls on the tag.
     fn sample(&self, x: f64, y: f64) -> Option<u8> {
         let (dx, dy) = (x - self.position_enu_m[0], y - self.position_enu_m[1]);
         // Beyond the circle around the whole tag (white border included) nothing is on it:
         // skips the rotation for nearly every ground point of the frame.
-        let half_outer_m =
-            0.5 * self.tag_size_m * self.tag.size as f64 / self.tag.black_cells() as f64;
+        let half_outer_m = self.half_outer_m();
         if dx * dx + dy * dy > 2.0 * half_outer_m * half_outer_m * (1.0 + 1e-9) {
             return None;
         }
@@ -329,6 +350,47 @@ impl<'a> RenderedFrame<'a> {
         }
     }
 
+    /// Whether no pixel of this frame can show the tag: the scene has none, an occluder
+    /// hides it ([`TargetAppearance::hidden_by`], whatever the lens), or the square around
+    /// the whole tag ([`TargetAppearance::reach_m`]) lies beyond one side of the frame by
+    /// more than a block of the renderer's corner grid and a pixel (a tag that close to the
+    /// frame still decides which of its blocks are evaluated exactly, and so the frame's last
+    /// grey level). Then every pixel is the one a scene without the target gives (tested).
+    /// The last is decided only for a lens without distortion, where the ground maps to the
+    /// image by a homography: the square's corners all in front of the camera, their hull
+    /// holds the projected tag. With distortion, `false` (the frame is searched as any
+    /// other).
+    pub fn holds_no_tag(&self) -> bool {
+        let Some(t) = &self.scene.target else {
+            return true;
+        };
+        if t.hidden_by(&self.scene.occluders) {
+            return true;
+        }
+        if self.cam.intrinsics.has_distortion() {
+            return false;
+        }
+        let r = t.reach_m();
+        let [x, y] = t.position_enu_m;
+        let mut corners = [[0.0; 2]; 4];
+        for (k, (dx, dy)) in [(-r, -r), (r, -r), (r, r), (-r, r)].into_iter().enumerate() {
+            match self
+                .cam
+                .world_enu_to_pixel([x + dx, y + dy], 0.0, self.pose)
+            {
+                Some(px) => corners[k] = px,
+                None => return false,
+            }
+        }
+        let (w, h) = self.size();
+        let margin = (BLOCK_PX + 2) as f64;
+        let all = |f: &dyn Fn(&[f64; 2]) -> bool| corners.iter().all(f);
+        all(&|p| p[0] < -margin)
+            || all(&|p| p[1] < -margin)
+            || all(&|p| p[0] > w as f64 + margin)
+            || all(&|p| p[1] > h as f64 + margin)
+    }
+
     fn timed<T>(&mut self, f: impl FnOnce(&Self) -> T) -> T {
         let t0 = std::time::Instant::now();
         let out = f(self);
@@ -350,6 +412,10 @@ impl FrameSource for RenderedFrame<'_> {
         let (width, height) = self.size();
         let r = PixelRect::clipped(x0, y0, w, h, width, height);
         self.timed(|f| render_region(f.cam, f.pose, f.scene, f.opts, f.noise_seed, r))
+    }
+
+    fn holds_no_tag(&self) -> bool {
+        RenderedFrame::holds_no_tag(self)
     }
 
     fn full(&mut self) -> &GrayImage {
@@ -530,7 +596,12 @@ fn corner_radiance(
             outline([a.x, a.y], [z.x, z.y]);
         }
     }
-    if let Some(t) = &scene.target {
+    // A tag hidden under a canopy has no edge to show: its blocks stay as the bare scene's.
+    if let Some(t) = scene
+        .target
+        .as_ref()
+        .filter(|t| !t.hidden_by(&scene.occluders))
+    {
         // The whole tag (white border included): its cell edges are inside.
         let grow = t.tag.size as f64 / t.tag.black_cells() as f64;
         let k = t.corners_enu().map(|q| {

@@ -137,6 +137,24 @@ impl PolygonEnu {
         inside
     }
 
+    /// Whether the whole axis-aligned square of half side `half_m` about `center` lies
+    /// inside, clear of the boundary: its corners inside, and no edge of the polygon meets
+    /// its sides (touching counts as meeting) or has a vertex in it. For a simple polygon
+    /// that puts every point of the square inside.
+    pub fn contains_square(&self, center: &Enu2, half_m: f64) -> bool {
+        let (lo, hi) = (center.add_scalar(-half_m), center.add_scalar(half_m));
+        let corners = [lo, Enu2::new(hi.x, lo.y), hi, Enu2::new(lo.x, hi.y)];
+        if !corners.iter().all(|c| self.contains(c)) {
+            return false;
+        }
+        let n = self.vertices.len();
+        (0..n).all(|i| {
+            let (a, b) = (self.vertices[i], self.vertices[(i + 1) % n]);
+            let vertex_in = a.x >= lo.x && a.x <= hi.x && a.y >= lo.y && a.y <= hi.y;
+            !vertex_in && (0..4).all(|k| !segments_meet(&a, &b, &corners[k], &corners[(k + 1) % 4]))
+        })
+    }
+
     /// Signed-area magnitude in square metres (shoelace formula).
     pub fn area_m2(&self) -> f64 {
         let n = self.vertices.len();
@@ -148,6 +166,24 @@ impl PolygonEnu {
         }
         0.5 * s.abs()
     }
+}
+
+/// Whether segments `ab` and `cd` share a point (touching and collinear overlap count).
+fn segments_meet(a: &Enu2, b: &Enu2, c: &Enu2, d: &Enu2) -> bool {
+    let cross =
+        |o: &Enu2, p: &Enu2, q: &Enu2| (p.x - o.x) * (q.y - o.y) - (p.y - o.y) * (q.x - o.x);
+    // q on segment op, given that the three are collinear.
+    let on = |o: &Enu2, p: &Enu2, q: &Enu2| {
+        q.x >= o.x.min(p.x) && q.x <= o.x.max(p.x) && q.y >= o.y.min(p.y) && q.y <= o.y.max(p.y)
+    };
+    let (d1, d2) = (cross(c, d, a), cross(c, d, b));
+    let (d3, d4) = (cross(a, b, c), cross(a, b, d));
+    let apart = |u: f64, v: f64| (u > 0.0 && v < 0.0) || (u < 0.0 && v > 0.0);
+    (apart(d1, d2) && apart(d3, d4))
+        || (d1 == 0.0 && on(c, d, a))
+        || (d2 == 0.0 && on(c, d, b))
+        || (d3 == 0.0 && on(a, b, c))
+        || (d4 == 0.0 && on(a, b, d))
 }
 
 #[cfg(test)]
@@ -199,6 +235,40 @@ mod tests {
         assert!(l.contains(&Enu2::new(1.5, 0.5)));
         assert!(!l.contains(&Enu2::new(1.5, 1.5)));
         assert!((l.area_m2() - 3.0).abs() < 1e-12);
+    }
+
+    /// A square well inside an L is inside; one over the L's inner corner, one poking out
+    /// of a side, one touching the boundary and one around a notch are not.
+    #[test]
+    fn a_square_inside_a_polygon_is_clear_of_its_boundary() {
+        let l = PolygonEnu::new(vec![
+            Enu2::new(0.0, 0.0),
+            Enu2::new(4.0, 0.0),
+            Enu2::new(4.0, 2.0),
+            Enu2::new(2.0, 2.0),
+            Enu2::new(2.0, 4.0),
+            Enu2::new(0.0, 4.0),
+        ])
+        .unwrap();
+        assert!(l.contains_square(&Enu2::new(1.0, 1.0), 0.5));
+        assert!(l.contains_square(&Enu2::new(3.0, 1.0), 0.9));
+        // Over the L's inner corner (2, 2): three corners inside, one out.
+        assert!(!l.contains_square(&Enu2::new(1.9, 1.9), 0.6));
+        assert!(!l.contains_square(&Enu2::new(3.8, 1.0), 0.5));
+        assert!(!l.contains_square(&Enu2::new(1.0, 1.0), 1.0));
+        // A notch whose tip is inside the square while the square's corners are not cut off.
+        let notched = PolygonEnu::new(vec![
+            Enu2::new(0.0, 0.0),
+            Enu2::new(4.0, 0.0),
+            Enu2::new(4.0, 4.0),
+            Enu2::new(2.1, 4.0),
+            Enu2::new(2.0, 2.2),
+            Enu2::new(1.9, 4.0),
+            Enu2::new(0.0, 4.0),
+        ])
+        .unwrap();
+        assert!(!notched.contains_square(&Enu2::new(2.0, 2.0), 0.5));
+        assert!(notched.contains_square(&Enu2::new(2.0, 1.0), 0.5));
     }
 
     #[test]

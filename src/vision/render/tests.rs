@@ -285,3 +285,147 @@ fn a_region_is_exactly_the_whole_frames_pixels_there() {
         }
     }
 }
+
+/// A frame that says it holds no tag is, pixel for pixel, the frame of the scene without
+/// the target (blur, noise and supersampling on, a tilted camera, the tag slid out across
+/// each side of the frame past the margin); a tag whose border still reaches into the frame
+/// is not skipped; a lens with distortion is never decided.
+#[test]
+fn a_frame_that_holds_no_tag_is_the_scene_without_the_target() {
+    let cam = CameraModel {
+        intrinsics: Intrinsics::ideal(160, 90, 1.2217),
+        mount: CameraMount::nadir(),
+    };
+    let tilted = VehiclePoseNed {
+        position_ned_m: [0.0, 0.0, -8.0],
+        roll_rad: 0.05,
+        pitch_rad: -0.08,
+        yaw_rad: 0.7,
+    };
+    let opts = RenderOptions {
+        supersample: 3,
+        blur_sigma_px: 0.8,
+        noise_sigma: 2.0,
+        ..RenderOptions::default()
+    };
+    let bare = SceneEnu {
+        target: None,
+        ..scene()
+    };
+    let mut skipped = 0;
+    let mut kept_with_tag_pixels = 0;
+    for (dx, dy) in [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0), (0.7, 0.7)] {
+        for step in 0..24 {
+            let d = 3.0 + 0.25 * step as f64;
+            let mut s = scene();
+            // Pose NED [0, 0] is ENU [0, 0]; the tag slides out along (dx, dy).
+            let at = [d * dx, d * dy];
+            s.target.as_mut().unwrap().position_enu_m = at;
+            let frame = RenderedFrame::new(&cam, &tilted, &s, &opts, 5);
+            let with = render(&cam, &tilted, &s, &opts, 5);
+            let without = render(&cam, &tilted, &bare, &opts, 5);
+            if frame.holds_no_tag() {
+                skipped += 1;
+                let differ: Vec<usize> = (0..with.data.len())
+                    .filter(|&i| with.data[i] != without.data[i])
+                    .collect();
+                let corners: Vec<_> = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                    .iter()
+                    .map(|(a, b)| {
+                        let r = s.target.as_ref().unwrap().reach_m();
+                        cam.world_enu_to_pixel([at[0] + a * r, at[1] + b * r], 0.0, &tilted)
+                    })
+                    .collect();
+                assert!(
+                    differ.is_empty(),
+                    "skipped at {at:?}: {} pixels differ, first at ({}, {}); corners {corners:?}",
+                    differ.len(),
+                    differ.first().map_or(0, |i| i % 160),
+                    differ.first().map_or(0, |i| i / 160)
+                );
+            } else if with.data != without.data {
+                kept_with_tag_pixels += 1;
+            }
+        }
+    }
+    assert!(
+        skipped >= 20,
+        "the test must reach frames without the tag: {skipped}"
+    );
+    assert!(kept_with_tag_pixels >= 20, "{kept_with_tag_pixels}");
+    let s = scene();
+    assert!(RenderedFrame::new(&cam, &tilted, &bare, &opts, 5).holds_no_tag());
+    let far = SceneEnu {
+        target: s.target.clone().map(|t| TargetAppearance {
+            position_enu_m: [40.0, 0.0],
+            ..t
+        }),
+        ..scene()
+    };
+    assert!(RenderedFrame::new(&cam, &tilted, &far, &opts, 5).holds_no_tag());
+    let mut bent = cam.clone();
+    bent.intrinsics.distortion = [-0.1, 0.0, 0.0, 0.0, 0.0];
+    assert!(!RenderedFrame::new(&bent, &tilted, &far, &opts, 5).holds_no_tag());
+}
+
+/// A tag under an occluder's canopy is not in the frame, whatever the lens: the frame says
+/// so, and it is pixel for pixel the scene without the target; a canopy with a notch
+/// reaching into the tag's square, or one smaller than the square, hides nothing.
+#[test]
+fn a_tag_under_a_canopy_holds_no_tag() {
+    let mut bent = CameraModel {
+        intrinsics: Intrinsics::ideal(120, 90, 1.0),
+        mount: CameraMount::nadir(),
+    };
+    bent.intrinsics.distortion = [-0.1, 0.01, 0.0, 0.0, 0.0];
+    let opts = RenderOptions {
+        supersample: 3,
+        blur_sigma_px: 0.6,
+        noise_sigma: 1.0,
+        ..RenderOptions::default()
+    };
+    // A canopy over the tag (at (1, 2), its square +-0.44 m) with a notch in its top edge.
+    let canopy = |notch: Enu2| {
+        PolygonEnu::new(vec![
+            Enu2::new(0.0, 0.5),
+            Enu2::new(2.2, 0.8),
+            Enu2::new(2.2, 3.2),
+            notch,
+            Enu2::new(0.0, 3.5),
+        ])
+        .unwrap()
+    };
+    let above = pose();
+    let covered = SceneEnu {
+        occluders: vec![canopy(Enu2::new(1.6, 2.7))],
+        ..scene()
+    };
+    assert!(RenderedFrame::new(&bent, &above, &covered, &opts, 3).holds_no_tag());
+    let bare = SceneEnu {
+        target: None,
+        ..covered.clone()
+    };
+    assert!(
+        render(&bent, &above, &covered, &opts, 3).data
+            == render(&bent, &above, &bare, &opts, 3).data
+    );
+    let notched = SceneEnu {
+        occluders: vec![canopy(Enu2::new(1.2, 2.1))],
+        ..scene()
+    };
+    assert!(!RenderedFrame::new(&bent, &above, &notched, &opts, 3).holds_no_tag());
+    let small = SceneEnu {
+        occluders: vec![PolygonEnu::square(Enu2::new(1.0, 2.0), 0.8)],
+        ..scene()
+    };
+    assert!(!RenderedFrame::new(&bent, &above, &small, &opts, 3).holds_no_tag());
+    let small_bare = SceneEnu {
+        target: None,
+        ..small.clone()
+    };
+    assert!(
+        render(&bent, &above, &small, &opts, 3).data
+            != render(&bent, &above, &small_bare, &opts, 3).data,
+        "the uncovered rim of the tag shows"
+    );
+}
