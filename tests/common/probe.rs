@@ -388,6 +388,19 @@ pub fn assert_within_floors(
     flights: &[Figures],
     floors: &[(&str, f64)],
 ) {
+    if let Err(why) = within_floors(name, a, reference, flights, floors) {
+        panic!("{why}");
+    }
+}
+
+/// What [`assert_within_floors`] checks, saying what is out of range instead of failing.
+pub fn within_floors(
+    name: &str,
+    a: &Figures,
+    reference: &str,
+    flights: &[Figures],
+    floors: &[(&str, f64)],
+) -> Result<(), String> {
     assert!(!flights.is_empty(), "no recorded flights of {reference}");
     type Get = fn(&Figures) -> f64;
     let checks: [(&str, Get, f64, f64); 9] = [
@@ -419,11 +432,14 @@ pub fn assert_within_floors(
             ));
         }
     }
-    assert!(
-        off.is_empty(),
-        "{name} answers the probe unlike {reference}:\n{}\n{name}: {a:?}\n{reference}: {flights:?}",
-        off.join("\n")
-    );
+    if off.is_empty() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{name} answers the probe unlike {reference}:\n{}\n{name}: {a:?}\n{reference}: {flights:?}",
+            off.join("\n")
+        ))
+    }
 }
 
 /// The figures of the recorded flights `tests/fixtures/sitl/NAME-K.csv` (K = 1, 2, ...).
