@@ -104,6 +104,8 @@ impl Config {
             kernel: Gaussian2::new(g.entropy_kernel_cov_m2),
             miss_probability: self.filter.miss_probability,
             process_noise: twice(self.filter.process_noise_cov_m2),
+            step_s: self.filter_dt_s(),
+            intercept_within_s: g.intercept_within_s,
         }
     }
 

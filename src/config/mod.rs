@@ -495,6 +495,15 @@ pub struct GuidanceConfig {
     /// Covariance of the Gaussian transition kernel p(x_i | x_j) in the entropy formulas,
     /// square metres (the paper's code uses Q).
     pub entropy_kernel_cov_m2: [[f64; 2]; 2],
+    /// Far candidates as intercepts once the target has been seen, seconds: a predicted
+    /// particle beyond the reach of one horizon becomes the point where the drone, at its top
+    /// speed, meets it carried on at its own velocity, looked ahead by at most this long (and
+    /// EER judges what a far candidate sees at that time). Before the first detection the
+    /// paper's candidate (the particle where it is at the horizon's end). Optional; absent,
+    /// the paper's candidates always (the field configs set 10 s: BENCHMARKS "Field scale,
+    /// part 16").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intercept_within_s: Option<f64>,
     /// The lawnmower sweep.
     pub lawn: LawnConfig,
 }

@@ -305,3 +305,25 @@ fn the_agent_speed_limit_shape_is_optional_and_a_bad_one_is_named() {
         "{msg}"
     );
 }
+
+/// `guidance.intercept_within_s` is optional (absent: the paper's candidates), a lead is
+/// passed to EER as given, and a lead of zero or less is an error naming the key.
+#[test]
+fn the_intercept_lead_is_optional_and_a_bad_one_is_named() {
+    let c = Config::default_lab();
+    assert_eq!(c.guidance.intercept_within_s, None);
+    assert_eq!(c.eer_params().intercept_within_s, None);
+    let set = load_modified(|t| {
+        tbl(t, "guidance").insert("intercept_within_s".into(), 25.0.into());
+    })
+    .unwrap();
+    assert_eq!(set.eer_params().intercept_within_s, Some(25.0));
+    for bad in [0.0, -1.0] {
+        let msg = load_modified(|t| {
+            tbl(t, "guidance").insert("intercept_within_s".into(), bad.into());
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(msg.contains("guidance.intercept_within_s"), "{msg}");
+    }
+}

@@ -242,6 +242,9 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     count("guidance.horizon_steps", g.horizon_steps)?;
     count("guidance.candidate_grid_side", g.candidate_grid_side)?;
     covariance("guidance.entropy_kernel_cov_m2", &g.entropy_kernel_cov_m2)?;
+    if let Some(t) = g.intercept_within_s {
+        positive("guidance.intercept_within_s", t)?;
+    }
     let l = &g.lawn;
     if l.legs_x_m.is_empty() {
         return Err(invalid(

@@ -22,6 +22,11 @@
 //! particle j approximated at its own propagated position. H_now uses the same kernel on
 //! the current particles.
 //!
+//! Field-scale extension, documented where it departs from the paper ([`intercepts`],
+//! `guidance.intercept_within_s`, off unless a config sets it): once the target has been
+//! seen, a predicted particle beyond one horizon's reach is a candidate where the agent
+//! meets it, and EER judges what that candidate sees when the agent gets there.
+//!
 //! The fast evaluation rests on one observation: the measured-branch entropies do not
 //! depend on the candidate (the candidate only decides whether each is received), and the
 //! missed-detection entropy depends on the candidate only through sums over the particles
@@ -61,6 +66,13 @@ pub struct EerParams {
     pub miss_probability: f64,
     /// Process noise added at each rollout step: N(0, 2Q).
     pub process_noise: Gaussian2,
+    /// The filter period, s (one rollout step).
+    pub step_s: f64,
+    /// Far candidates as intercepts (see [`intercepts`]): a predicted particle beyond the
+    /// reachable region becomes the point where the agent, flying at its top speed, meets
+    /// it carried on at its own velocity, looked ahead by at most this long after the
+    /// horizon; `None` keeps the paper's candidate, the predicted particle itself.
+    pub intercept_within_s: Option<f64>,
 }
 
 /// Everything the evaluation needs, after the rollout: pure data.
@@ -78,6 +90,10 @@ pub struct EerInputs {
     pub alpha: Vec<f64>,
     /// N_M.
     pub n_m: usize,
+    /// The velocity of each predicted particle over its whole kept track (the rollout's
+    /// last K_in positions: one step's difference would be mostly the rollout's process
+    /// noise), m/s, world ENU (zero when the track keeps a single position).
+    pub velocity: Vec<Enu2>,
 }
 
 /// The result of one planning cycle.
@@ -155,6 +171,81 @@ pub fn candidates(
     out
 }
 
+/// How an agent at `agent_enu` flying at `speed_mps` meets a far predicted particle: the
+/// time after the horizon's end (`horizon_s`) at which it reaches the particle carried on
+/// at its velocity, at most `within_s`. The smallest `lead >= 0` with
+/// `|p + v lead - a| <= speed (horizon + lead)`; `within_s` when the particle outruns the
+/// agent.
+pub fn intercept_lead_s(
+    agent_enu: &Enu2,
+    predicted_enu: &Enu2,
+    velocity_enu: &Enu2,
+    speed_mps: f64,
+    horizon_s: f64,
+    within_s: f64,
+) -> f64 {
+    let d = predicted_enu - agent_enu;
+    let reach_now = speed_mps * horizon_s;
+    if d.norm_squared() <= reach_now * reach_now {
+        return 0.0;
+    }
+    // (v.v - s^2) t^2 + 2 (d.v - s^2 H) t + (d.d - s^2 H^2) = 0: with |v| < s the product
+    // of the roots is negative (the constant is positive here), one root is positive.
+    let s2 = speed_mps * speed_mps;
+    let a = velocity_enu.norm_squared() - s2;
+    let b = 2.0 * (d.dot(velocity_enu) - s2 * horizon_s);
+    let c = d.norm_squared() - reach_now * reach_now;
+    if a >= 0.0 {
+        return within_s;
+    }
+    let lead = (b + (b * b - 4.0 * a * c).sqrt()) / (-2.0 * a);
+    if lead.is_finite() {
+        lead.clamp(0.0, within_s)
+    } else {
+        within_s
+    }
+}
+
+/// Far candidates as intercepts: each predicted particle (candidates `0..N_H`, see
+/// [`candidates`]) beyond the reachable region's farthest point is moved to where the agent
+/// meets it ([`intercept_lead_s`]), clamped to the geofence; returns each candidate's lead
+/// (zero for the reachable ones), for [`evaluate_fast_led`]. A field-scale extension of
+/// the paper's candidate set: there a far predicted particle is where the target will be
+/// at the horizon's end, and by the time the agent gets there the target has driven on (a
+/// car at 10 m/s, 200 m away, is 130 m further when a 15 m/s drone arrives). The planner
+/// uses them only once the target has been seen ([`EerPlanner::use_intercepts`]): the
+/// intercepts of a cue's belief, spread both ways along the roads, pull the search back and
+/// forth (BENCHMARKS "Field scale, parts 15-16").
+#[allow(clippy::too_many_arguments)]
+pub fn intercepts(
+    inputs: &EerInputs,
+    candidates: &mut [Enu2],
+    agent_enu: &Enu2,
+    speed_mps: f64,
+    horizon_s: f64,
+    farthest_m: f64,
+    within_s: f64,
+    world: &World,
+) -> Vec<f64> {
+    let mut leads = vec![0.0; candidates.len()];
+    for (j, p) in inputs.predicted.iter().enumerate() {
+        if (p - agent_enu).norm() <= farthest_m {
+            continue;
+        }
+        let lead = intercept_lead_s(
+            agent_enu,
+            p,
+            &inputs.velocity[j],
+            speed_mps,
+            horizon_s,
+            within_s,
+        );
+        leads[j] = lead;
+        candidates[j] = world.workspace_enu.clamp(&led(inputs, j, lead));
+    }
+    leads
+}
+
 /// Entropy of the current estimate (eq. 7 form over the N_H current particles).
 fn h_now(inputs: &EerInputs, kernel: &Gaussian2) -> f64 {
     let log_s = log_transition_sums(&inputs.current, &inputs.current, &inputs.weights, kernel);
@@ -210,6 +301,40 @@ pub fn evaluate_fast(
     miss_probability: f64,
     scratch: &mut EerScratch,
 ) -> (f64, Vec<f64>) {
+    evaluate_fast_led(
+        inputs,
+        candidates,
+        &[],
+        world,
+        kernel,
+        miss_probability,
+        scratch,
+    )
+}
+
+/// Where particle `i` is `lead_s` after the horizon's end, carried on at its velocity.
+fn led(inputs: &EerInputs, i: usize, lead_s: f64) -> Enu2 {
+    if lead_s > 0.0 {
+        inputs.predicted[i] + inputs.velocity[i] * lead_s
+    } else {
+        inputs.predicted[i]
+    }
+}
+
+/// [`evaluate_fast`] with a lead per candidate (`leads[c]`, s; empty: all zero): which
+/// particles a candidate sees is judged where they will be when the agent gets there,
+/// `lead` after the horizon's end ([`intercepts`]). Approximation, documented: the
+/// measured-branch entropies and the kernel sums stay those at the horizon's end (a
+/// belief carried along at its particles' velocities keeps its shape over the lead).
+pub fn evaluate_fast_led(
+    inputs: &EerInputs,
+    candidates: &[Enu2],
+    leads: &[f64],
+    world: &World,
+    kernel: &Gaussian2,
+    miss_probability: f64,
+    scratch: &mut EerScratch,
+) -> (f64, Vec<f64>) {
     let n = inputs.predicted.len();
     let n_m = inputs.n_m;
     let h0 = h_now(inputs, kernel);
@@ -256,11 +381,18 @@ pub fn evaluate_fast(
     let fp = world.footprint;
     let eer = candidates
         .iter()
-        .map(|c| {
+        .enumerate()
+        .map(|(k, c)| {
+            let lead_s = leads.get(k).copied().unwrap_or(0.0);
             let (mut w_vis, mut wls_vis, mut p_vis, mut a_h_vis) = (0.0, 0.0, 0.0, 0.0);
             for i in 0..n {
-                let p = &inputs.predicted[i];
-                if !scratch.occluded[i] && fp.contains(c, p) {
+                let in_view = if lead_s > 0.0 {
+                    let p = led(inputs, i, lead_s);
+                    fp.contains(c, &p) && !world.is_occluded(&p)
+                } else {
+                    !scratch.occluded[i] && fp.contains(c, &inputs.predicted[i])
+                };
+                if in_view {
                     w_vis += w[i];
                     wls_vis += w[i] * log_s[i];
                     p_vis += scratch.alpha_particle[i];
@@ -289,6 +421,19 @@ pub fn evaluate_reference(
     kernel: &Gaussian2,
     miss_probability: f64,
 ) -> (f64, Vec<f64>) {
+    evaluate_reference_led(inputs, candidates, &[], world, kernel, miss_probability)
+}
+
+/// [`evaluate_reference`] with a lead per candidate, as [`evaluate_fast_led`] takes it:
+/// tests only.
+pub fn evaluate_reference_led(
+    inputs: &EerInputs,
+    candidates: &[Enu2],
+    leads: &[f64],
+    world: &World,
+    kernel: &Gaussian2,
+    miss_probability: f64,
+) -> (f64, Vec<f64>) {
     let n = inputs.predicted.len();
     let w = &inputs.weights;
     let trans = |x: &Enu2, c: &Enu2| kernel.pdf(&(x - c));
@@ -300,28 +445,24 @@ pub fn evaluate_reference(
             w[i] * s.ln()
         })
         .sum::<f64>();
-    let visible = |c: &Enu2, p: &Enu2| world.is_visible(c, p);
     let eer = candidates
         .iter()
-        .map(|c| {
+        .enumerate()
+        .map(|(k, c)| {
+            let lead_s = leads.get(k).copied().unwrap_or(0.0);
+            let visible = |c: &Enu2, i: usize| world.is_visible(c, &led(inputs, i, lead_s));
             let mut expected = 0.0;
             for j in 0..n {
                 for m in 0..inputs.n_m {
                     let idx = j * inputs.n_m + m;
-                    let lik: Vec<f64> = if visible(c, &inputs.predicted[j]) {
+                    let lik: Vec<f64> = if visible(c, j) {
                         let z = inputs.measurements[idx];
                         (0..n)
                             .map(|i| world.measurement.noise.pdf(&(z - inputs.predicted[i])))
                             .collect()
                     } else {
                         (0..n)
-                            .map(|i| {
-                                if visible(c, &inputs.predicted[i]) {
-                                    miss_probability
-                                } else {
-                                    1.0
-                                }
-                            })
+                            .map(|i| if visible(c, i) { miss_probability } else { 1.0 })
                             .collect()
                     };
                     let norm: f64 = (0..n).map(|i| lik[i] * w[i]).sum();
@@ -366,9 +507,17 @@ pub struct EerPlanner {
     next: Vec<Enu2>,
     inputs: EerInputs,
     scratch: EerScratch,
+    intercepts_on: bool,
 }
 
 impl EerPlanner {
+    /// Whether far candidates are intercepts (when `intercept_within_s` is set): the tracker
+    /// turns them on once the target has been seen, so that the search from the cue stays
+    /// the paper's.
+    pub fn use_intercepts(&mut self, on: bool) {
+        self.intercepts_on = on;
+    }
+
     /// A planner with these parameters.
     pub fn new(params: EerParams) -> Self {
         Self {
@@ -378,6 +527,7 @@ impl EerPlanner {
             next: Vec::new(),
             inputs: EerInputs::default(),
             scratch: EerScratch::default(),
+            intercepts_on: true,
         }
     }
 
@@ -438,6 +588,16 @@ impl EerPlanner {
         inp.predicted.clear();
         inp.predicted
             .extend((0..self.indices.len()).map(|i| self.rollout.newest(i)));
+        let k_in = self.rollout.k_in();
+        let step_s = self.params.step_s;
+        inp.velocity.clear();
+        inp.velocity.extend((0..self.indices.len()).map(|i| {
+            if k_in >= 2 && step_s > 0.0 {
+                (self.rollout.newest(i) - self.rollout.at(i, 0)) / (step_s * (k_in - 1) as f64)
+            } else {
+                Enu2::zeros()
+            }
+        }));
 
         let n_m = self.params.measurements_per_particle;
         inp.n_m = n_m;
@@ -458,20 +618,36 @@ impl EerPlanner {
 
     /// Steps 3 and 4: candidates, EER of each, argmax. No motion-model calls.
     pub fn decide(&mut self, agent_enu: &Enu2, world: &World) -> EerDecision {
-        let cands = candidates(
+        let p = &self.params;
+        let mut cands = candidates(
             &self.inputs,
             agent_enu,
-            self.params.reach_m,
-            self.params.reach_shape,
-            self.params.grid_side,
+            p.reach_m,
+            p.reach_shape,
+            p.grid_side,
             world,
         );
-        let (h0, eer) = evaluate_fast(
+        let horizon_s = p.horizon_steps as f64 * p.step_s;
+        let leads = match p.intercept_within_s {
+            Some(within_s) if horizon_s > 0.0 && self.intercepts_on => intercepts(
+                &self.inputs,
+                &mut cands,
+                agent_enu,
+                p.reach_m / horizon_s,
+                horizon_s,
+                p.reach_shape.farthest_in_reaches() * p.reach_m,
+                within_s,
+                world,
+            ),
+            _ => Vec::new(),
+        };
+        let (h0, eer) = evaluate_fast_led(
             &self.inputs,
             &cands,
+            &leads,
             world,
-            &self.params.kernel,
-            self.params.miss_probability,
+            &p.kernel,
+            p.miss_probability,
             &mut self.scratch,
         );
         let (mut best, mut best_v) = (0, f64::NEG_INFINITY);

@@ -656,6 +656,7 @@ impl Tracker {
                 reason: "eer needs a particle set".into(),
             });
         };
+        self.planner.use_intercepts(self.last_measurement.is_some());
         let d = self.planner.plan(
             pf,
             model.as_mut(),

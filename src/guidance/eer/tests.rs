@@ -300,3 +300,119 @@ fn a_disc_of_reach_keeps_the_grid_within_reach() {
     let diagonal = Enu2::new(reach, reach) / std::f64::consts::SQRT_2;
     assert!(disc.iter().any(|p| (p - diagonal).norm() < 1e-12));
 }
+
+/// A particle driving straight away from the agent is met where both have covered the
+/// same time: lead = (D - s H) / (s - v); a parked one is met at its own position, lead =
+/// (D - s H) / s; one within a horizon's reach needs none; one faster than the agent is
+/// looked ahead by the cap.
+#[test]
+fn the_intercept_lead_is_when_the_agent_meets_the_particle() {
+    let agent = Enu2::new(10.0, -5.0);
+    let (s, h, d, v) = (15.0, 2.0, 200.0, 10.0);
+    let away = Enu2::new(0.6, 0.8);
+    let p = agent + away * d;
+    let lead = intercept_lead_s(&agent, &p, &(away * v), s, h, 60.0);
+    assert!((lead - (d - s * h) / (s - v)).abs() < 1e-9, "{lead}");
+    // The meeting point is as far from the agent as it flies in horizon + lead.
+    let met = p + away * v * lead;
+    assert!(((met - agent).norm() - s * (h + lead)).abs() < 1e-9);
+    let parked = intercept_lead_s(&agent, &p, &Enu2::zeros(), s, h, 60.0);
+    assert!((parked - (d - s * h) / s).abs() < 1e-9, "{parked}");
+    let towards = intercept_lead_s(&agent, &p, &(-away * v), s, h, 60.0);
+    assert!((towards - (d - s * h) / (s + v)).abs() < 1e-9, "{towards}");
+    let near = agent + away * (0.9 * s * h);
+    assert_eq!(
+        intercept_lead_s(&agent, &near, &(away * v), s, h, 60.0),
+        0.0
+    );
+    assert_eq!(
+        intercept_lead_s(&agent, &p, &(away * 20.0), s, h, 60.0),
+        60.0
+    );
+    assert_eq!(intercept_lead_s(&agent, &p, &(away * v), s, h, 5.0), 5.0);
+}
+
+/// Random inputs with velocities: the fast evaluation with leads equals the reference's.
+#[test]
+fn fast_eer_with_leads_equals_reference() {
+    let mut c = Config::default_lab();
+    c.guidance.entropy_kernel_cov_m2 = [[0.05, 0.01], [0.01, 0.04]];
+    let world = c.world();
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let mut rng = CoreRng::seed_from_u64(19);
+    let mut inp = random_inputs(&mut rng, 14, 2, &world);
+    inp.velocity = (0..14)
+        .map(|_| Enu2::new(rng.gen_range(-0.4..0.4), rng.gen_range(-0.4..0.4)))
+        .collect();
+    let agent = Enu2::new(-0.5, 0.4);
+    let cands = candidates(&inp, &agent, 0.6, ReachShape::Square, 4, &world);
+    let leads: Vec<f64> = (0..cands.len()).map(|_| rng.gen_range(0.0..3.0)).collect();
+    let mut scratch = EerScratch::default();
+    let (_, fast) = evaluate_fast_led(&inp, &cands, &leads, &world, &kernel, 0.1, &mut scratch);
+    let (_, reference) = evaluate_reference_led(&inp, &cands, &leads, &world, &kernel, 0.1);
+    for (a, b) in fast.iter().zip(&reference) {
+        assert!((a - b).abs() < 1e-9, "fast {a} vs reference {b}");
+    }
+    // The leads matter: without them some candidate's EER differs.
+    let (_, unled) = evaluate_fast(&inp, &cands, &world, &kernel, 0.1, &mut scratch);
+    assert!(fast.iter().zip(&unled).any(|(a, b)| (a - b).abs() > 1e-6));
+}
+
+/// At field scale, a car 300 m away driving on at 10 m/s: with intercepts the far
+/// candidates are where a 15 m/s drone meets it, ahead of where the car is at the horizon's
+/// end, and EER's waypoint is one of them; the paper's candidates are the particles where
+/// they are then.
+#[test]
+fn far_candidates_are_where_the_agent_meets_the_particles() {
+    let c = Config::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/outdoor.toml"
+    )))
+    .unwrap();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(23);
+    let mut inp = EerInputs {
+        n_m: 1,
+        ..Default::default()
+    };
+    let east = Enu2::new(10.0, 0.0);
+    for _ in 0..40 {
+        let p = Enu2::new(300.0 + rng.gen_range(-5.0..5.0), rng.gen_range(-3.0..3.0));
+        inp.current.push(p - east * 2.0);
+        inp.predicted.push(p);
+        inp.velocity.push(east);
+        inp.weights.push(1.0 / 40.0);
+        inp.measurements
+            .push(world.measurement.measure(&p, &mut rng));
+        inp.alpha.push(1.0 / 40.0);
+    }
+    let agent = Enu2::new(0.0, 0.0);
+    let (s, h) = (15.0, 2.0);
+    let mut cands = candidates(&inp, &agent, s * h, ReachShape::Disc, 8, &world);
+    let paper = cands.clone();
+    let leads = intercepts(&inp, &mut cands, &agent, s, h, s * h, 60.0, &world);
+    // (300 - 30) / (15 - 10) = 54 s ahead: 540 m further east.
+    for j in 0..40 {
+        assert!((leads[j] - 54.0).abs() < 2.5, "{}", leads[j]);
+        assert!((cands[j].x - paper[j].x - 10.0 * leads[j]).abs() < 1e-9);
+    }
+    assert!(leads[40..].iter().all(|l| *l == 0.0));
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let (_, eer) = evaluate_fast_led(
+        &inp,
+        &cands,
+        &leads,
+        &world,
+        &kernel,
+        1e-6,
+        &mut EerScratch::default(),
+    );
+    let best = (0..eer.len())
+        .max_by(|a, b| eer[*a].total_cmp(&eer[*b]))
+        .unwrap();
+    assert!(
+        best < 40 && cands[best].x > 800.0,
+        "{best}: {}",
+        cands[best]
+    );
+}
