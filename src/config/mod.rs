@@ -181,7 +181,9 @@ pub struct DaemonConfig {
     /// settling (a real autopilot's position loop hunts by a few centimetres) begins
     /// tracking anyway, with a warning, s.
     pub start_settle_s: f64,
-    /// The target counts as lost after this long without a measurement, s.
+    /// The target counts as lost after this long without a measurement, s; the filter's
+    /// belief is then spread again along the routes the target can have driven since it
+    /// was last seen, less those the camera has looked at since.
     pub target_lost_after_s: f64,
     /// What to do while the target is lost: `eer` (keep the EER search), `lawn` (lawnmower
     /// sweep), `hold` (stay where the vehicle is).

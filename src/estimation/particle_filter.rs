@@ -215,6 +215,77 @@ impl ParticleFilter {
         self.weights.fill(1.0 / n as f64);
     }
 
+    /// Starts over with every particle on a route the target can have driven from `start`
+    /// (position and heading, world ENU) for `driven_s` seconds at one speed drawn from
+    /// `speeds_mps`, its turns drawn by their probabilities ([`crate::world::road::RoadNetwork::drive`]). A
+    /// particle's history is its route's last positions; its weight is the likelihood along
+    /// its route of the empty frames `looked` (seconds after the start, ascending, and where
+    /// the camera was): `miss_probability` for each frame that would have seen it there.
+    /// So what the camera has ruled out since the start stays ruled out, where spreading
+    /// over the reachable roads would give it back its share. False (nothing changed)
+    /// without roads.
+    pub fn spread_along_routes<R: Rng + ?Sized>(
+        &mut self,
+        world: &World,
+        start: (Enu2, Option<Enu2>),
+        speeds_mps: std::ops::RangeInclusive<f64>,
+        driven_s: f64,
+        looked: &[(f64, Enu2)],
+        rng: &mut R,
+    ) -> bool {
+        let n = self.weights.len();
+        let k = self.params.history_len;
+        if n == 0 || k == 0 || world.road.nodes.is_empty() {
+            return false;
+        }
+        let dt = self.params.dt_s;
+        // The frames' times, then the history's (oldest first), driven in time order.
+        let mut times: Vec<f64> = looked.iter().map(|(t, _)| t.max(0.0)).collect();
+        times.extend((0..k).map(|j| (driven_s - (k - 1 - j) as f64 * dt).max(0.0)));
+        let mut order: Vec<usize> = (0..times.len()).collect();
+        order.sort_by(|a, b| times[*a].total_cmp(&times[*b]));
+        let ln_miss = self.params.miss_probability.ln();
+        let mut log_w = vec![0.0; n];
+        let mut at = vec![Enu2::zeros(); times.len()];
+        for (i, lw) in log_w.iter_mut().enumerate() {
+            let speed = rng.gen_range(speeds_mps.clone());
+            let distances: Vec<f64> = order.iter().map(|&j| speed * times[j]).collect();
+            let Some(route) = world.road.drive(&start.0, start.1, &distances, rng) else {
+                return false;
+            };
+            for (&j, (p, _)) in order.iter().zip(route) {
+                at[j] = p;
+            }
+            let seen = looked
+                .iter()
+                .zip(&at)
+                .filter(|((_, camera), p)| world.is_visible(camera, p))
+                .count();
+            *lw = if seen == 0 {
+                0.0
+            } else {
+                seen as f64 * ln_miss
+            };
+            let tr = self.histories.track_mut(i);
+            for (j, p) in at[looked.len()..].iter().enumerate() {
+                tr[2 * j] = p.x;
+                tr[2 * j + 1] = p.y;
+            }
+        }
+        let max = log_w.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        if max.is_finite() {
+            for (w, lw) in self.weights.iter_mut().zip(&log_w) {
+                *w = (lw - max).exp();
+            }
+        } else {
+            self.weights.fill(1.0);
+        }
+        if !self.normalize() {
+            self.weights.fill(1.0 / n as f64);
+        }
+        true
+    }
+
     /// Replaces up to `count` particles drawn at random by road-following clones of
     /// particles drawn by weight: each clone is its source moved along the roads (the
     /// allowed directions, the turns drawn by their probabilities) by up to one step at the

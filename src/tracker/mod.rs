@@ -34,6 +34,14 @@ use crate::world::World;
 /// How far back the measured track reaches for the target's last seen velocity, s.
 const MEASURED_TRACK_S: f64 = 3.0;
 
+/// How far back the target's cruising speed (the fastest it was measured driving over
+/// [`MEASURED_TRACK_S`]) is remembered, s.
+const CRUISE_WINDOW_S: f64 = 20.0;
+
+/// The most empty frames a re-spread weighs its routes with (at 3 Hz, 22 minutes); older
+/// ones are let go, which only forgets what they ruled out.
+const MAX_EMPTY_FRAMES: usize = 4096;
+
 /// What to do while the target is lost.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LostFallback {
@@ -176,10 +184,15 @@ pub struct Tracker {
     respread_done: bool,
     /// The estimate's speed at the last step with a measurement, m/s.
     last_seen_speed_mps: f64,
+    /// The speeds measured over the last [`CRUISE_WINDOW_S`] (time, m/s), oldest first.
+    recent_speeds: std::collections::VecDeque<(f64, f64)>,
     /// The estimate's velocity then, world ENU, m/s (which way the target was driving).
     last_seen_velocity_enu: Enu2,
     /// The measurements of the last [`MEASURED_TRACK_S`] seconds, oldest first.
     recent_measurements: std::collections::VecDeque<(f64, Enu2)>,
+    /// The frames without the target since the last measurement (time, where the camera
+    /// was, world ENU), oldest first, at most [`MAX_EMPTY_FRAMES`].
+    empty_frames: std::collections::VecDeque<(f64, Enu2)>,
 }
 
 impl Tracker {
@@ -228,8 +241,10 @@ impl Tracker {
             last_eer: f64::NAN,
             respread_done: false,
             last_seen_speed_mps: 0.0,
+            recent_speeds: std::collections::VecDeque::new(),
             last_seen_velocity_enu: Enu2::zeros(),
             recent_measurements: std::collections::VecDeque::new(),
+            empty_frames: std::collections::VecDeque::new(),
         })
     }
 
@@ -319,6 +334,12 @@ impl Tracker {
         }
         if let Some(z) = z {
             self.remember_measurement(t_s, z);
+            self.empty_frames.clear();
+        } else if frame {
+            if self.empty_frames.len() == MAX_EMPTY_FRAMES {
+                self.empty_frames.pop_front();
+            }
+            self.empty_frames.push_back((t_s, taken_from));
         }
         let started = clock.now_s();
         let stepped = if frame {
@@ -341,6 +362,15 @@ impl Tracker {
             self.respread_done = false;
             self.last_seen_velocity_enu = self.measured_velocity();
             self.last_seen_speed_mps = self.last_seen_velocity_enu.norm();
+            self.recent_speeds
+                .push_back((t_s, self.last_seen_speed_mps));
+            while self
+                .recent_speeds
+                .front()
+                .is_some_and(|(t, _)| t_s - t > CRUISE_WINDOW_S)
+            {
+                self.recent_speeds.pop_front();
+            }
         } else {
             self.respread_if_long_unseen(t_s);
             self.inject_where_it_can_be();
@@ -405,25 +435,32 @@ impl Tracker {
         }
     }
 
-    /// The speeds new hypotheses get: around the speed the target had when last seen (a
-    /// car keeps its speed through a junction it cannot be seen at), or any speed the
-    /// motion model allows when it was not moving or never seen.
+    /// The speeds new hypotheses get: from 0.7 x the speed the target had when last seen
+    /// to 1.3 x the fastest it was measured driving over the last [`CRUISE_WINDOW_S`] (a
+    /// car keeps its speed through a junction it cannot be seen at, and one last seen
+    /// slowing for a turn drives on at its cruising speed), or any speed the motion model
+    /// allows when it was not moving or never seen.
     fn hypothesis_speeds(&self) -> std::ops::RangeInclusive<f64> {
         let v_max = self.params.filter.init_speed_max_mps;
         let s = self.last_seen_speed_mps;
-        if self.last_measurement.is_some() && s > 0.1 * v_max {
-            (0.7 * s).min(v_max)..=(1.3 * s).min(v_max)
+        let cruise = self.recent_speeds.iter().map(|(_, v)| *v).fold(s, f64::max);
+        if self.last_measurement.is_some() && cruise > 0.1 * v_max {
+            (0.7 * s).min(v_max)..=(1.3 * cruise).min(v_max)
         } else {
             0.0..=v_max
         }
     }
 
     /// After `respread_after_s` without a measurement, once per such spell: the particles
-    /// go back on the roads the target can have driven to since it was last seen (forward
-    /// along the road graph from the last measurement, see [`Self::reachable_since_seen`]);
-    /// around the cue if it was never seen (within the largest speed times the time
-    /// since); anywhere without either. A disc around the last measurement would put half
-    /// the belief behind the target and on roads it cannot have reached.
+    /// go back on the roads the target can have driven to since it was last seen, each on
+    /// one route forward from the last measurement and weighted by the empty frames since
+    /// ([`Self::respread_along_routes`]); around the cue if it was never seen (within the
+    /// largest speed times the time since); anywhere without either. A disc around the
+    /// last measurement would put half the belief behind the target and on roads it cannot
+    /// have reached; spreading over the reachable roads alone (before session 19) gave the
+    /// branches the camera had already ruled out their share back (field-grid: the belief
+    /// that had found the car turning north was split even again at the re-spread, and the
+    /// drone flew east after it).
     fn respread_if_long_unseen(&mut self, t_s: f64) {
         let Some(after) = self.params.respread_after_s else {
             return;
@@ -432,11 +469,12 @@ impl Tracker {
             return;
         }
         self.respread_done = true;
+        if self.respread_along_routes(t_s) {
+            return;
+        }
         let speeds = self.hypothesis_speeds();
         let v_far = *speeds.end();
-        let reachable = self
-            .reachable_since_seen(t_s)
-            .or_else(|| self.reachable_since_cue(t_s));
+        let reachable = self.reachable_since_cue(t_s);
         let region = match self.last_measurement {
             Some((tm, zm)) => Some((zm, v_far * (t_s - tm))),
             None => self.params.cue.map(|(c, r)| (c, r + v_far * t_s)),
@@ -449,25 +487,33 @@ impl Tracker {
         }
     }
 
-    /// The roads the target can have driven to since its last measurement, forward along
-    /// the allowed directions from where it was seen heading the way it was going, at the
-    /// speeds of [`Self::hypothesis_speeds`] (plus one filter period of slack for the
-    /// measurement's noise), weighted by the turn probabilities. `None` before the first
-    /// measurement or when no road is reachable: then a disc around it is used.
-    fn reachable_since_seen(&self, t_s: f64) -> Option<crate::world::road::RoadPieces> {
-        let (tm, zm) = self.last_measurement?;
+    /// The re-spread once the target has been seen: every particle on a route it can have
+    /// driven since, weighted by the empty frames since (see
+    /// [`ParticleFilter::spread_along_routes`]). False when it cannot be (never seen, no
+    /// roads, or the Kalman filter).
+    fn respread_along_routes(&mut self, t_s: f64) -> bool {
+        let Some((tm, zm)) = self.last_measurement else {
+            return false;
+        };
         let speeds = self.hypothesis_speeds();
-        let elapsed = (t_s - tm).max(0.0);
-        let slack = speeds.end() * self.params.filter.dt_s;
-        let roads = self.world.road.reachable_from(
-            &zm,
-            Some(self.last_seen_velocity_enu),
-            (
-                (speeds.start() * elapsed - slack).max(0.0),
-                speeds.end() * elapsed + slack,
+        let looked: Vec<(f64, Enu2)> = self
+            .empty_frames
+            .iter()
+            .filter(|(t, _)| *t >= tm)
+            .map(|(t, camera)| (t - tm, *camera))
+            .collect();
+        let start = (zm, Some(self.last_seen_velocity_enu));
+        match &mut self.estimator {
+            Estimator::Particle { pf, .. } => pf.spread_along_routes(
+                &self.world,
+                start,
+                speeds,
+                (t_s - tm).max(0.0),
+                &looked,
+                &mut self.rng_filter,
             ),
-        );
-        (roads.length_m() > 0.0).then_some(roads)
+            Estimator::Kalman(_) => false,
+        }
     }
 
     /// Before the first measurement, the roads a target that was on the roads within the

@@ -339,3 +339,81 @@ fn with_a_disc_of_reach_a_waypoint_beyond_the_rim_is_approached_at_top_speed() {
     );
     assert_eq!(square, Enu2::zeros());
 }
+
+/// `config/field-grid.toml`, whose car drives east along y = 0 into a fork at (500, 0)
+/// under an overpass: on east, or north to (500, 500).
+fn field_grid() -> Config {
+    Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/field-grid.toml"))
+        .unwrap()
+}
+
+/// One filter step at `t_s` of a frame taken from `camera`, with or without the target.
+fn frame(t: &mut Tracker, t_s: f64, camera: Enu2, z: Option<Enu2>) {
+    let observation = Observation::Frame {
+        taken_from_enu: camera,
+        z,
+    };
+    t.update(t_s, observation, &input(camera), &FrozenClock)
+        .unwrap();
+}
+
+/// The car seen driving east at `speed` m/s up to (468, 0) at 14 s, its last 3 s at
+/// `last_speed` m/s; returns the time of the last frame.
+fn seen_driving_east(t: &mut Tracker, dt: f64, speed: f64, last_speed: f64) -> f64 {
+    let mut t_s = 0.0;
+    let mut x = 468.0 - 3.0 * last_speed - 11.0 * speed;
+    while t_s < 14.0 - 1e-9 {
+        t_s += dt;
+        x += dt * if t_s > 11.0 { last_speed } else { speed };
+        let car = Enu2::new(x, 0.0);
+        frame(t, t_s, car, Some(car));
+    }
+    t_s
+}
+
+#[test]
+fn the_re_spread_keeps_out_the_branch_the_camera_has_watched_empty() {
+    let c = field_grid();
+    let dt = 1.0 / c.timing.filter_hz;
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    let mut t_s = seen_driving_east(&mut t, dt, 12.0, 12.0);
+    // Then nothing, the camera over the east exit of the fork, until after the re-spread
+    // (`daemon.target_lost_after_s`, 10 s).
+    let watched = Enu2::new(550.0, 0.0);
+    let lost_s = t_s;
+    while t_s < lost_s + c.daemon.target_lost_after_s + 1.0 {
+        t_s += dt;
+        frame(&mut t, t_s, watched, None);
+    }
+    let pf = t.estimator().particle_filter().unwrap();
+    let (mut north, mut east) = (0.0, 0.0);
+    for (p, w) in pf.particles().iter().zip(pf.weights()) {
+        if p.y > 40.0 && (p.x - 500.0).abs() < 5.0 {
+            north += w;
+        } else if p.x > 530.0 && p.y.abs() < 5.0 {
+            east += w;
+        }
+    }
+    // The car can be 60-190 m on; it drove through the watched view only on the east.
+    assert!(north > 0.95 && east < 0.01, "north {north}, east {east}");
+    let mean = t.estimator().mean();
+    assert!((mean.x - 500.0).abs() < 5.0 && mean.y > 60.0, "{mean}");
+}
+
+#[test]
+fn a_car_last_seen_slowing_is_re_spread_up_to_its_cruising_speed() {
+    let c = field_grid();
+    let dt = 1.0 / c.timing.filter_hz;
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    seen_driving_east(&mut t, dt, 12.0, 4.0);
+    let speeds = t.hypothesis_speeds();
+    // From 0.7 x the last measured speed (4 m/s over the last 3 s) to 1.3 x the cruise.
+    assert!((speeds.start() - 0.7 * 4.0).abs() < 0.3, "{speeds:?}");
+    assert!((speeds.end() - 1.3 * 12.0).abs() < 0.5, "{speeds:?}");
+    // Seen driving steadily: around that speed.
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    seen_driving_east(&mut t, dt, 12.0, 12.0);
+    let speeds = t.hypothesis_speeds();
+    assert!((speeds.start() - 0.7 * 12.0).abs() < 0.3, "{speeds:?}");
+    assert!((speeds.end() - 1.3 * 12.0).abs() < 0.5, "{speeds:?}");
+}

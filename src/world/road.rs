@@ -240,6 +240,47 @@ impl RoadNetwork {
         out
     }
 
+    /// One route a target at `from` (heading `heading`, placed as in
+    /// [`Self::reachable_from`]) can drive, its turns drawn by their probabilities: where
+    /// it is, and the unit direction of its road, after each path length in `distances_m`
+    /// (ascending, m). A target at a node without a way on stops there. `None` without roads.
+    pub fn drive<R: Rng + ?Sized>(
+        &self,
+        from: &Enu2,
+        heading: Option<Enu2>,
+        distances_m: &[f64],
+        rng: &mut R,
+    ) -> Option<Vec<(Enu2, Enu2)>> {
+        let (mut u, mut v, s0) = self.nearest_edge(from, heading)?;
+        // Path length at the start of edge u->v (negative: `from` lies along it).
+        let mut edge_start = -s0;
+        let mut out = Vec::with_capacity(distances_m.len());
+        // A bound on edges driven (a loop of zero-length edges would never add length).
+        let mut edges_left = 100_000usize;
+        for &d in distances_m {
+            loop {
+                let a = self.nodes[u].position_enu;
+                let b = self.nodes[v].position_enu;
+                let len = (b - a).norm();
+                let dir = if len > 1e-9 {
+                    (b - a) / len
+                } else {
+                    Enu2::zeros()
+                };
+                if d <= edge_start + len || self.nodes[v].next.is_empty() || edges_left == 0 {
+                    let along = (d - edge_start).clamp(0.0, len);
+                    out.push((a + dir * along, dir));
+                    break;
+                }
+                edge_start += len;
+                edges_left -= 1;
+                let w = self.sample_next(v, rng);
+                (u, v) = (v, w);
+            }
+        }
+        Some(out)
+    }
+
     /// The edge (from-node, to-node indices) nearest to `p` and the distance along it of
     /// `p`'s projection; edges heading against `heading` count only when no other is near.
     fn nearest_edge(&self, p: &Enu2, heading: Option<Enu2>) -> Option<(usize, usize, f64)> {
@@ -622,5 +663,54 @@ mod tests {
         let share = on_2_3 as f64 / n as f64;
         let expected = 1.6 / total;
         assert!((share - expected).abs() < 0.015, "{share} vs {expected}");
+    }
+
+    /// A fork: 0 -> 1 east, then at 1 an even choice of 2 (east, a dead end) or 3 (north,
+    /// a dead end).
+    fn fork() -> RoadNetwork {
+        let node = |id, x_m, y_m| NodeConfig { id, x_m, y_m };
+        let edge = |from, to, p| EdgeConfig { from, to, p };
+        RoadNetwork::from_config(&RoadConfig {
+            nodes: vec![
+                node(0, 0.0, 0.0),
+                node(1, 100.0, 0.0),
+                node(2, 200.0, 0.0),
+                node(3, 100.0, 100.0),
+            ],
+            edges: vec![edge(0, 1, 1.0), edge(1, 2, 0.5), edge(1, 3, 0.5)],
+            start_node: 0,
+        })
+    }
+
+    #[test]
+    fn a_route_is_driven_along_the_allowed_ways_and_takes_each_turn_by_its_probability() {
+        let road = fork();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let from = Enu2::new(50.0, 1.0);
+        let distances = [0.0, 25.0, 50.0, 80.0, 500.0];
+        let mut east = 0;
+        let n = 4000;
+        for _ in 0..n {
+            let route = road
+                .drive(&from, Some(Enu2::new(1.0, 0.0)), &distances, &mut rng)
+                .unwrap();
+            let at: Vec<Enu2> = route.iter().map(|(p, _)| *p).collect();
+            assert!((at[0] - Enu2::new(50.0, 0.0)).norm() < 1e-9, "{}", at[0]);
+            assert!((at[1] - Enu2::new(75.0, 0.0)).norm() < 1e-9, "{}", at[1]);
+            assert!((at[2] - Enu2::new(100.0, 0.0)).norm() < 1e-9, "{}", at[2]);
+            assert!((route[1].1 - Enu2::new(1.0, 0.0)).norm() < 1e-9);
+            // 30 m past the fork, on one branch or the other, heading along it; then
+            // stopped at that branch's dead end.
+            if (at[3] - Enu2::new(130.0, 0.0)).norm() < 1e-9 {
+                east += 1;
+                assert!((at[4] - Enu2::new(200.0, 0.0)).norm() < 1e-9, "{}", at[4]);
+            } else {
+                assert!((at[3] - Enu2::new(100.0, 30.0)).norm() < 1e-9, "{}", at[3]);
+                assert!((route[3].1 - Enu2::new(0.0, 1.0)).norm() < 1e-9);
+                assert!((at[4] - Enu2::new(100.0, 100.0)).norm() < 1e-9, "{}", at[4]);
+            }
+        }
+        let share = east as f64 / n as f64;
+        assert!((share - 0.5).abs() < 0.03, "{share}");
     }
 }

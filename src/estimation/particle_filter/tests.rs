@@ -400,3 +400,58 @@ fn a_track_driving_a_one_way_road_the_wrong_way_fades() {
     let [east, west, creeping] = weights_by_track(&mut pf, &world, true);
     assert_eq!((east, west), (creeping, creeping));
 }
+
+/// `config/field-grid.toml`: at node 1 (500, 0), under an overpass, a car driving east
+/// turns north (to 500, 500) or goes on east (to 1000, 0), even odds.
+fn field_grid() -> Config {
+    Config::from_toml_str(
+        include_str!("../../../config/field-grid.toml"),
+        std::path::Path::new("config/field-grid.toml"),
+    )
+    .unwrap()
+}
+
+/// The weight on the northbound and on the eastbound branch after the fork at (500, 0).
+fn branch_weights(pf: &ParticleFilter) -> (f64, f64) {
+    let mut north_east = (0.0, 0.0);
+    for (i, w) in pf.weights().iter().enumerate() {
+        let p = pf.particle(i);
+        if (p.x - 500.0).abs() < 1e-6 && p.y > 40.0 {
+            north_east.0 += w;
+        } else if p.y.abs() < 1e-6 && p.x > 530.0 {
+            north_east.1 += w;
+        }
+    }
+    north_east
+}
+
+#[test]
+fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
+    let c = field_grid();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(8);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let start = (Enu2::new(468.0, 0.0), Some(Enu2::new(12.0, 0.0)));
+    // Ten seconds on at 8.4-15.6 m/s: 84-156 m of road, through the fork either way.
+    assert!(pf.spread_along_routes(&world, start, 8.4..=15.6, 10.0, &[], &mut rng));
+    let (north, east) = branch_weights(&pf);
+    assert!(north > 0.4 && east > 0.4, "{north} {east}");
+    let k = c.filter.history_len;
+    for i in 0..pf.weights().len() {
+        let p = pf.particle(i);
+        assert!(world.road.distance_to_roads(&p) < 1e-6, "{p}");
+        // The history is the route: its last step is one period at the particle's speed.
+        let h = pf.histories();
+        let step = (h.newest(i) - h.at(i, k - 2)).norm() / c.filter_params().dt_s;
+        assert!((8.3..=15.7).contains(&step), "{step}");
+    }
+    // A camera over the east exit (550, 0) from 3 s on saw nothing: every eastbound route
+    // drove through its view, no northbound one did.
+    let looked: Vec<(f64, Enu2)> = (9..=30)
+        .map(|j| (j as f64 / 3.0, Enu2::new(550.0, 0.0)))
+        .collect();
+    assert!(pf.spread_along_routes(&world, start, 8.4..=15.6, 10.0, &looked, &mut rng));
+    let (north, east) = branch_weights(&pf);
+    assert!(north > 0.99 && east < 1e-3, "{north} {east}");
+    assert!((pf.weights().iter().sum::<f64>() - 1.0).abs() < 1e-9);
+}
