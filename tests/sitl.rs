@@ -709,12 +709,15 @@ fn against_recording(now: &probe::Response, name: &str) -> Result<(), String> {
     // PX4 SIH's recordings understate its spread when flown in CI under the suite's load
     // (session 11, three CI runs): step overshoot 0.149-0.230 m (recorded 0.24-0.33),
     // ramp lag 0.569-0.687 m (recorded 0.40-0.48), hover RMS 0.206-0.352 m (recorded
-    // 0.33-0.45). Floors for those three figures; the others keep their margins.
+    // 0.33-0.45). Floors for those three figures; the others keep their margins. Hold
+    // drift too (sessions 18-19, three fresh-clone CI flights: 0.164-0.210 m, recorded
+    // 0.38-0.53 m): it holds its position better than recorded on some boots.
     let floors: &[(&str, f64)] = if name == "px4-sih" {
         &[
             ("step_overshoot_m", 0.15),
             ("ramp_lag_m", 0.3),
             ("hover_rms_m", 0.2),
+            ("hold_drift_m", 0.25),
         ]
     } else {
         &[]
