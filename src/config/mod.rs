@@ -183,7 +183,8 @@ pub struct DaemonConfig {
     pub start_settle_s: f64,
     /// The target counts as lost after this long without a measurement, s; the filter's
     /// belief is then spread again along the routes the target can have driven since it
-    /// was last seen, less those the camera has looked at since.
+    /// was last seen, less those the camera has looked at since (before it is first seen,
+    /// with an `[acquisition]` cue: the routes from the cue's roads since the start).
     pub target_lost_after_s: f64,
     /// What to do while the target is lost: `eer` (keep the EER search), `lawn` (lawnmower
     /// sweep), `hold` (stay where the vehicle is).

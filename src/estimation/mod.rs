@@ -6,5 +6,6 @@ pub mod particle_filter;
 
 pub use kalman::{KalmanFilter, KalmanParams};
 pub use particle_filter::{
-    FilterCounters, FilterError, FilterParams, ParticleFilter, ResampleAction, StepReport,
+    FilterCounters, FilterError, FilterParams, ParticleFilter, ResampleAction, RouteStart,
+    StepReport,
 };

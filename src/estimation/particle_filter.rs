@@ -111,6 +111,16 @@ pub struct FilterCounters {
     pub nonfinite_predictions: u64,
 }
 
+/// Where the routes of [`ParticleFilter::spread_along_routes`] start.
+#[derive(Debug, Clone, Copy)]
+pub enum RouteStart<'a> {
+    /// Where the target was last measured, with the way it was driving (world ENU).
+    At(Enu2, Option<Enu2>),
+    /// A point drawn on these roads by length for each route, driving along its road (the
+    /// operator's cue before the target has been seen).
+    On(&'a RoadPieces),
+}
+
 /// A particle filter whose particles each carry a history of their last K_in positions.
 #[derive(Debug, Clone)]
 pub struct ParticleFilter {
@@ -216,7 +226,7 @@ impl ParticleFilter {
     }
 
     /// Starts over with every particle on a route the target can have driven from `start`
-    /// (position and heading, world ENU) for `driven_s` seconds at one speed drawn from
+    /// (see [`RouteStart`]) for `driven_s` seconds at one speed drawn from
     /// `speeds_mps`, its turns drawn by their probabilities ([`crate::world::road::RoadNetwork::drive`]). A
     /// particle's history is its route's last positions; its weight is the likelihood along
     /// its route of the empty frames `looked` (seconds after the start, ascending, and where
@@ -227,7 +237,7 @@ impl ParticleFilter {
     pub fn spread_along_routes<R: Rng + ?Sized>(
         &mut self,
         world: &World,
-        start: (Enu2, Option<Enu2>),
+        start: RouteStart<'_>,
         speeds_mps: std::ops::RangeInclusive<f64>,
         driven_s: f64,
         looked: &[(f64, Enu2)],
@@ -248,9 +258,16 @@ impl ParticleFilter {
         let mut log_w = vec![0.0; n];
         let mut at = vec![Enu2::zeros(); times.len()];
         for (i, lw) in log_w.iter_mut().enumerate() {
+            let (from, heading) = match start {
+                RouteStart::At(p, heading) => (p, heading),
+                RouteStart::On(roads) => match roads.sample(rng) {
+                    Some((p, dir)) => (p, Some(dir)),
+                    None => return false,
+                },
+            };
             let speed = rng.gen_range(speeds_mps.clone());
             let distances: Vec<f64> = order.iter().map(|&j| speed * times[j]).collect();
-            let Some(route) = world.road.drive(&start.0, start.1, &distances, rng) else {
+            let Some(route) = world.road.drive(&from, heading, &distances, rng) else {
                 return false;
             };
             for (&j, (p, _)) in order.iter().zip(route) {

@@ -23,7 +23,9 @@ pub use ports::{
 };
 pub use schedule::{Due, Rates, Schedule};
 
-use crate::estimation::{FilterError, FilterParams, KalmanFilter, KalmanParams, ParticleFilter};
+use crate::estimation::{
+    FilterError, FilterParams, KalmanFilter, KalmanParams, ParticleFilter, RouteStart,
+};
 use crate::frames::Enu2;
 use crate::guidance::{EerParams, EerPlanner, GuidanceKind, LawnConfig, LawnmowerPath, ReachShape};
 use crate::metrics::StepRecord;
@@ -107,7 +109,8 @@ pub struct TrackerParams {
     /// within it; `None`: on the whole road network.
     pub cue: Option<(Enu2, f64)>,
     /// After this long without a measurement, the belief is spread again along the roads
-    /// that the target can have reached from where it was last seen; `None`: never.
+    /// that the target can have reached from where it was last seen (never seen, with a
+    /// cue: since the start, from the cue's roads); `None`: never.
     pub respread_after_s: Option<f64>,
     /// Share of the particles replaced at each step without a measurement by hypotheses on
     /// the roads around the belief (0: none), for motion models that do not know the roads.
@@ -454,13 +457,15 @@ impl Tracker {
     /// After `respread_after_s` without a measurement, once per such spell: the particles
     /// go back on the roads the target can have driven to since it was last seen, each on
     /// one route forward from the last measurement and weighted by the empty frames since
-    /// ([`Self::respread_along_routes`]); around the cue if it was never seen (within the
-    /// largest speed times the time since); anywhere without either. A disc around the
-    /// last measurement would put half the belief behind the target and on roads it cannot
-    /// have reached; spreading over the reachable roads alone (before session 19) gave the
-    /// branches the camera had already ruled out their share back (field-grid: the belief
-    /// that had found the car turning north was split even again at the re-spread, and the
-    /// drone flew east after it).
+    /// ([`Self::respread_along_routes`]); never seen, each on a route from a point on the
+    /// cue's roads, weighted by every empty frame since the start (before session 20 the
+    /// cue's roads carried forward, which gave the roads the drone had flown along empty
+    /// their share back: on field-eight the car was never found in 4 runs of 10); anywhere
+    /// without a cue. A disc around the last measurement would put half the belief behind
+    /// the target and on roads it cannot have reached; spreading over the reachable roads
+    /// alone (before session 19) gave the branches the camera had already ruled out their
+    /// share back (field-grid: the belief that had found the car turning north was split
+    /// even again at the re-spread, and the drone flew east after it).
     fn respread_if_long_unseen(&mut self, t_s: f64) {
         let Some(after) = self.params.respread_after_s else {
             return;
@@ -487,13 +492,23 @@ impl Tracker {
         }
     }
 
-    /// The re-spread once the target has been seen: every particle on a route it can have
-    /// driven since, weighted by the empty frames since (see
-    /// [`ParticleFilter::spread_along_routes`]). False when it cannot be (never seen, no
-    /// roads, or the Kalman filter).
+    /// The re-spread along routes: every particle on a route the target can have driven
+    /// since it was last measured (never seen: since the start, from a point on the cue's
+    /// roads), weighted by the empty frames since (see
+    /// [`ParticleFilter::spread_along_routes`]). False when it cannot be (never seen
+    /// without a cue, no roads within it, or the Kalman filter).
     fn respread_along_routes(&mut self, t_s: f64) -> bool {
-        let Some((tm, zm)) = self.last_measurement else {
-            return false;
+        let cue_roads;
+        let (tm, start) = match (self.last_measurement, self.params.cue) {
+            (Some((tm, zm)), _) => (tm, RouteStart::At(zm, Some(self.last_seen_velocity_enu))),
+            (None, Some(cue)) => {
+                cue_roads = self.world.road.roads_within(Some(cue));
+                if cue_roads.length_m() <= 0.0 {
+                    return false;
+                }
+                (0.0, RouteStart::On(&cue_roads))
+            }
+            _ => return false,
         };
         let speeds = self.hypothesis_speeds();
         let looked: Vec<(f64, Enu2)> = self
@@ -502,7 +517,6 @@ impl Tracker {
             .filter(|(t, _)| *t >= tm)
             .map(|(t, camera)| (t - tm, *camera))
             .collect();
-        let start = (zm, Some(self.last_seen_velocity_enu));
         match &mut self.estimator {
             Estimator::Particle { pf, .. } => pf.spread_along_routes(
                 &self.world,

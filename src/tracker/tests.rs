@@ -417,3 +417,52 @@ fn a_car_last_seen_slowing_is_re_spread_up_to_its_cruising_speed() {
     assert!((speeds.start() - 0.7 * 12.0).abs() < 0.3, "{speeds:?}");
     assert!((speeds.end() - 1.3 * 12.0).abs() < 0.5, "{speeds:?}");
 }
+
+/// The belief's weight in the view of a camera at (220, 0) and beyond it along the road
+/// 0 -> 1 of field-grid (y = 0, x > 251 m), after the target was never seen for `for_s`
+/// seconds while the camera stayed at `camera`.
+fn never_seen_while_watching(camera: Enu2, for_s: f64) -> (f64, f64) {
+    let c = field_grid();
+    let dt = 1.0 / c.timing.filter_hz;
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    let mut t_s = 0.0;
+    while t_s < for_s {
+        t_s += dt;
+        frame(&mut t, t_s, camera, None);
+    }
+    let pf = t.estimator().particle_filter().unwrap();
+    let view = Enu2::new(220.0, 0.0);
+    let (mut in_view, mut beyond) = (0.0, 0.0);
+    for (p, w) in pf.particles().iter().zip(pf.weights()) {
+        if c.world().footprint.contains(&view, p) {
+            in_view += w;
+        } else if p.x > 251.0 && p.y.abs() < 5.0 {
+            beyond += w;
+        }
+    }
+    (in_view, beyond)
+}
+
+#[test]
+fn before_the_first_sighting_the_re_spread_from_the_cue_keeps_out_what_was_watched_empty() {
+    // field-grid's cue (40, 30), 150 m: the road east from node 0 up to x = 187 m and the
+    // road south into node 0. A camera at (220, 0) watches x = 190-250 m of the road east
+    // from the start: a car from the cue that is now beyond it drove through its view.
+    // Just past the re-spread (`daemon.target_lost_after_s`, 10 s, from the start), and
+    // 10 s later (meanwhile the particles drift and hypotheses are injected around them).
+    let lost_s = field_grid().daemon.target_lost_after_s;
+    for for_s in [lost_s + 1.0, 2.0 * lost_s + 1.0] {
+        let (in_view, beyond) = never_seen_while_watching(Enu2::new(220.0, 0.0), for_s);
+        // Looking elsewhere (off every road), nothing is ruled out.
+        let (in_view_unwatched, beyond_unwatched) =
+            never_seen_while_watching(Enu2::new(1100.0, -150.0), for_s);
+        assert!(
+            in_view < 0.01 && beyond < 0.01,
+            "at {for_s} s: in view {in_view}, beyond {beyond}"
+        );
+        assert!(
+            in_view_unwatched > 0.05 && beyond_unwatched > 0.05,
+            "at {for_s} s, unwatched: in view {in_view_unwatched}, beyond {beyond_unwatched}"
+        );
+    }
+}

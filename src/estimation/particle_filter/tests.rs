@@ -431,7 +431,7 @@ fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
     let world = c.world();
     let mut rng = CoreRng::seed_from_u64(8);
     let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
-    let start = (Enu2::new(468.0, 0.0), Some(Enu2::new(12.0, 0.0)));
+    let start = RouteStart::At(Enu2::new(468.0, 0.0), Some(Enu2::new(12.0, 0.0)));
     // Ten seconds on at 8.4-15.6 m/s: 84-156 m of road, through the fork either way.
     assert!(pf.spread_along_routes(&world, start, 8.4..=15.6, 10.0, &[], &mut rng));
     let (north, east) = branch_weights(&pf);
