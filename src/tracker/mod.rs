@@ -477,18 +477,15 @@ impl Tracker {
         if self.respread_along_routes(t_s) {
             return;
         }
+        // No route to draw (no cue, or no road): the roads around where it can be.
         let speeds = self.hypothesis_speeds();
         let v_far = *speeds.end();
-        let reachable = self.reachable_since_cue(t_s);
         let region = match self.last_measurement {
             Some((tm, zm)) => Some((zm, v_far * (t_s - tm))),
             None => self.params.cue.map(|(c, r)| (c, r + v_far * t_s)),
         };
         if let Estimator::Particle { pf, .. } = &mut self.estimator {
-            match reachable {
-                Some(roads) => pf.spread_on_pieces(&roads, speeds, &mut self.rng_filter),
-                None => pf.spread_on_roads_at(&self.world, region, speeds, &mut self.rng_filter),
-            }
+            pf.spread_on_roads_at(&self.world, region, speeds, &mut self.rng_filter);
         }
     }
 
@@ -528,23 +525,6 @@ impl Tracker {
             ),
             Estimator::Kalman(_) => false,
         }
-    }
-
-    /// Before the first measurement, the roads a target that was on the roads within the
-    /// cue at the start can have driven to by `t_s`, forward along the allowed directions
-    /// at the speeds of [`Self::hypothesis_speeds`]. `None` after a measurement, without a
-    /// cue, or when no road is reachable.
-    fn reachable_since_cue(&self, t_s: f64) -> Option<crate::world::road::RoadPieces> {
-        if self.last_measurement.is_some() {
-            return None;
-        }
-        let cue = self.params.cue?;
-        let speeds = self.hypothesis_speeds();
-        let roads = self
-            .world
-            .road
-            .reachable_from_region(cue, (speeds.start() * t_s, speeds.end() * t_s));
-        (roads.length_m() > 0.0).then_some(roads)
     }
 
     /// At each step without a measurement, a share of the particles (`injection_share`) is
