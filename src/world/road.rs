@@ -196,50 +196,6 @@ impl RoadNetwork {
         out
     }
 
-    /// The roads a target that was somewhere on the roads within `region` (centre, radius)
-    /// can be on after driving a path length in `distance_m`, along the allowed
-    /// directions: each road piece inside the region carried forward, with a weight per
-    /// metre that spreads its length over the band it can have reached and follows the turn
-    /// probabilities. Empty when no road crosses the region.
-    pub fn reachable_from_region(&self, region: (Enu2, f64), distance_m: (f64, f64)) -> RoadPieces {
-        let mut out = RoadPieces {
-            pieces: Vec::new(),
-            weights: Vec::new(),
-            total: 0.0,
-        };
-        let (d_min, d_max) = distance_m;
-        for (u, node) in self.nodes.iter().enumerate() {
-            for &(v, _) in &node.next {
-                let a = node.position_enu;
-                let Some((p0, p1)) =
-                    clip_to_disc(a, self.nodes[v].position_enu, region.0, region.1)
-                else {
-                    continue;
-                };
-                let span = (p1 - p0).norm();
-                if span <= 1e-9 {
-                    continue;
-                }
-                // A start anywhere on the piece: the path from its first point is between
-                // d_min and d_max + span; its length is spread over that band.
-                let band = (d_max - d_min).max(0.0) + span;
-                let s0 = (p0 - a).norm();
-                self.walk(
-                    u,
-                    v,
-                    s0,
-                    0.0,
-                    span / band,
-                    (d_min, d_max + span),
-                    0,
-                    &mut out,
-                );
-            }
-        }
-        out.sum_total();
-        out
-    }
-
     /// One route a target at `from` (heading `heading`, placed as in
     /// [`Self::reachable_from`]) can drive, its turns drawn by their probabilities: where
     /// it is, and the unit direction of its road, after each path length in `distances_m`
@@ -532,49 +488,6 @@ mod tests {
         }
         let share = on_east as f64 / 4000.0;
         assert!((share - 0.6).abs() < 0.03, "east share {share}");
-    }
-
-    /// Never seen: a car somewhere on the roads of the cue at the start is, 20-30 s later at
-    /// up to 10 m/s, ahead of the cue along the allowed directions, never on the part of an
-    /// incoming road that flows into the cue (it would have been outside the cue at the start).
-    #[test]
-    fn from_a_cue_the_roads_reachable_lie_ahead_along_the_allowed_directions() {
-        // The outdoor loop: 5 (0,800) -> 0 (0,0) -> 1 (600,0); a cue of 50 m at node 0 holds
-        // the last 50 m of 5 -> 0 and the first 50 m of 0 -> 1.
-        let road = outdoor_road();
-        let cue = (Enu2::new(0.0, 0.0), 50.0);
-        let r = road.reachable_from_region(cue, (0.0, 300.0));
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let (mut east, mut south) = (0, 0);
-        for _ in 0..4000 {
-            let (p, dir) = r.sample(&mut rng).unwrap();
-            if p.y.abs() < 1e-9 {
-                east += 1;
-                assert!(p.x <= 350.0 + 1e-6, "beyond start + 300 m: {p:?}");
-                assert!((dir - Enu2::new(1.0, 0.0)).norm() < 1e-9);
-            } else {
-                // On 5 -> 0 only the part that was inside the cue.
-                south += 1;
-                assert!(p.x.abs() < 1e-9 && p.y <= 50.0 + 1e-6, "{p:?}");
-                assert!((dir - Enu2::new(0.0, -1.0)).norm() < 1e-9);
-            }
-        }
-        // Two 50 m pieces of equal weight per start: the eastern road carries the mass of
-        // both (the southern piece's cars drive onto it), the cue's southern piece a little.
-        assert!(east > 3 * south && south > 0, "east {east}, south {south}");
-        // At the start (zero path) it is the cue's roads themselves: 2 x 50 m.
-        let at_start = road.reachable_from_region(cue, (0.0, 0.0));
-        assert!(
-            (at_start.length_m() - 100.0).abs() < 1e-6,
-            "{}",
-            at_start.length_m()
-        );
-        // A cue with no road: nothing.
-        assert_eq!(
-            road.reachable_from_region((Enu2::new(300.0, 400.0), 20.0), (0.0, 100.0))
-                .length_m(),
-            0.0
-        );
     }
 
     #[test]
