@@ -197,12 +197,7 @@ impl ParticleFilter {
         speeds_mps: std::ops::RangeInclusive<f64>,
         rng: &mut R,
     ) {
-        let road = &world.road;
-        let mut roads = road.roads_within(region);
-        if roads.length_m() <= 0.0 {
-            // No road in the region: the whole network.
-            roads = road.roads_within(None);
-        }
+        let roads = world.road.roads_within_or_all(region);
         self.spread_on_pieces(&roads, speeds_mps, rng);
     }
 
@@ -388,15 +383,10 @@ impl ParticleFilter {
         speeds_mps: std::ops::RangeInclusive<f64>,
         rng: &mut R,
     ) {
-        let road = &world.road;
         if count == 0 {
             return;
         }
-        let mut roads = road.roads_within(region);
-        if roads.length_m() <= 0.0 {
-            // No road in the region: the whole network.
-            roads = road.roads_within(None);
-        }
+        let roads = world.road.roads_within_or_all(region);
         self.inject_on_pieces(&roads, count, speeds_mps, rng);
     }
 

@@ -150,6 +150,16 @@ impl RoadNetwork {
         }
     }
 
+    /// [`Self::roads_within`] `region`, or the whole network where no road lies in it: where
+    /// a target that must be on some road can be drawn when the region holds none.
+    pub fn roads_within_or_all(&self, region: Option<(Enu2, f64)>) -> RoadPieces {
+        let roads = self.roads_within(region);
+        if roads.length_m() > 0.0 || region.is_none() {
+            return roads;
+        }
+        self.roads_within(None)
+    }
+
     /// Total length of road within `region`, m.
     pub fn length_within(&self, region: Option<(Enu2, f64)>) -> f64 {
         self.pieces_within(region)
@@ -452,6 +462,23 @@ mod tests {
             let (any, along) = road.distances_to_roads(&q, &dir);
             assert!((any - 1.0).abs() < 1e-9 && (along - 1.0).abs() < 1e-9);
         }
+    }
+
+    /// A region holding road gives that road only; one holding none gives the whole
+    /// network (a target on the roads is somewhere on them), as does no region.
+    #[test]
+    fn roads_within_a_region_fall_back_to_the_whole_network_only_where_it_holds_none() {
+        let road = outdoor_road();
+        let all = road.roads_within(None).length_m();
+        let near_start = Some((Enu2::new(100.0, 0.0), 50.0));
+        let within = road.roads_within_or_all(near_start).length_m();
+        assert!(within > 0.0 && within < all, "{within} of {all}");
+        assert!((within - road.length_within(near_start)).abs() < 1e-9);
+        // Far outside the network: no road there, so all of it.
+        let empty = Some((Enu2::new(-5000.0, -5000.0), 10.0));
+        assert_eq!(road.roads_within(empty).length_m(), 0.0);
+        assert!((road.roads_within_or_all(empty).length_m() - all).abs() < 1e-9);
+        assert!((road.roads_within_or_all(None).length_m() - all).abs() < 1e-9);
     }
 
     #[test]
