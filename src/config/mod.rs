@@ -427,9 +427,10 @@ pub struct FilterConfig {
     /// driving a one-way road the wrong way fades).
     #[serde(default)]
     pub road_sigma_m: Option<f64>,
-    /// Share of the particles replaced, at each step without a measurement, by hypotheses
-    /// on the roads around the belief, for a motion model that does not know the roads
-    /// (constant velocity); 0 turns it off.
+    /// Share of the particles replaced, at each step without a measurement before the
+    /// first detection, by hypotheses on the roads around the belief, for a motion model
+    /// that does not know the roads (constant velocity; once the target has been seen its
+    /// particles at a junction are re-routed onto the roads instead); 0 turns both off.
     #[serde(default = "default_hypothesis_injection")]
     pub hypothesis_injection: f64,
 }

@@ -298,49 +298,40 @@ impl ParticleFilter {
         true
     }
 
-    /// Replaces up to `count` particles drawn at random by road-following clones of
-    /// particles drawn by weight: each clone is its source moved along the roads (the
-    /// allowed directions, the turns drawn by their probabilities) by up to one step at the
-    /// source's own speed, and keeps that speed along its new road. Only sources within a
-    /// step of a junction are cloned (elsewhere a clone would duplicate its source and keep
-    /// alive what negative information is removing). A constant-velocity
-    /// particle drives straight on through a junction; its clones take the other branches
-    /// too, in proportion to the belief, so what the agent has already ruled out stays
-    /// ruled out. Nothing without roads.
-    pub fn inject_road_followers<R: Rng + ?Sized>(
-        &mut self,
-        world: &World,
-        count: usize,
-        rng: &mut R,
-    ) {
+    /// Re-routes in place every particle within a step of a junction: a constant-velocity
+    /// particle drives straight on through a junction, off the road, where the road
+    /// constraint kills it; so each one whose next step leaves its road is put on one of the
+    /// roads it can take within that step (the turns drawn by their probabilities, never a
+    /// U-turn back the way it came unless there is no other way on), keeping its speed
+    /// and its weight. The belief then goes through a junction the way the target can,
+    /// every branch in proportion (before session 23, 2 % of the particles per step became
+    /// road-following clones: a corner kept ~2 % of the weight that reached it, the belief
+    /// slowed from 14 to 5-8 m/s at corners and slow clusters sat at the roads' ends;
+    /// BENCHMARKS.md "Field scale, part 21"). A particle whose step stays on its road (one
+    /// piece ahead, or two with the straight-on step within half a road sigma of a road:
+    /// a bend it follows anyway) is left alone. Nothing without roads.
+    pub fn reroute_at_junctions<R: Rng + ?Sized>(&mut self, world: &World, rng: &mut R) {
         let n = self.weights.len();
-        let k = self.params.history_len;
-        if count == 0 || n == 0 || k < 2 || world.road.nodes.is_empty() {
+        if n == 0 || self.params.history_len < 2 || world.road.nodes.is_empty() {
             return;
         }
         let dt = self.params.dt_s;
-        let sources: Vec<usize> = (0..count.min(n))
-            .map(|_| self.draw_by_weight(rng))
-            .collect();
-        for j in sources {
-            let p = self.histories.newest(j);
-            let v = (p - self.histories.at(j, k - 2)) / dt;
+        let on_road_m = 0.5 * self.params.road_sigma_m.unwrap_or(0.0);
+        for i in 0..n {
+            let p = self.histories.newest(i);
+            let v = self.track_velocity(i);
             let speed = v.norm();
-            if !speed.is_finite() {
-                continue;
-            }
-            let roads = world.road.reachable_from(&p, Some(v), (0.0, speed * dt));
-            if roads.pieces().count() < 2 {
-                // No junction within the step: a clone would only duplicate its source.
-                continue;
-            }
-            let i = rng.gen_range(0..n);
-            let w = self.weights[j];
-            if self.seed_on_roads(i, &roads, speed..=speed, rng) {
-                self.weights[i] = w;
+            let roads = world
+                .road
+                .reachable_from(&p, Some(v), (0.0, speed * dt))
+                .without_reversals(&v);
+            let pieces = roads.pieces().count();
+            let follows_its_road = pieces < 2
+                || (pieces == 2 && world.road.distance_to_roads(&(p + v * dt)) <= on_road_m);
+            if !follows_its_road {
+                self.seed_on_roads(i, &roads, speed..=speed, rng);
             }
         }
-        self.normalize();
     }
 
     /// An index drawn with probability proportional to its weight.
@@ -802,7 +793,13 @@ impl ParticleFilter {
     ///
     /// Slot t of the history takes the newest measurement at or before that step within
     /// the window (the oldest one for earlier slots), so the seeded tracks follow what was
-    /// actually seen.
+    /// actually seen. With one measurement in the window (the target has just come back
+    /// into view) every slot would take it and every track would stand still: a car that
+    /// drives out from under a bridge at 14 m/s was followed by a belief at rest, slow
+    /// hypotheses under the bridge the camera cannot refute took the weight, and the car
+    /// was lost for good (field-ring, BENCHMARKS.md "Field scale, part 21"). So each track
+    /// through one measurement moves at the velocity of a particle drawn by weight, the
+    /// prediction's own belief of how the target moves.
     fn reseed_around_measurements<R: Rng + ?Sized>(&mut self, world: &World, rng: &mut R) {
         let k = self.params.history_len;
         let n = self.weights.len();
@@ -820,24 +817,65 @@ impl ParticleFilter {
         };
         let slot_centre: Vec<Enu2> = (0..k)
             .map(|t| {
-                let step = now + t as u64 + 1 - k as u64;
-                in_window
-                    .iter()
-                    .rev()
-                    .find(|(s, _)| *s <= step)
+                // Slots before the filter's first step (a re-seed within its first k
+                // steps) take the oldest measurement; this used to wrap around in u64 and
+                // took the newest.
+                (now + t as u64 + 1)
+                    .checked_sub(k as u64)
+                    .and_then(|step| in_window.iter().rev().find(|(s, _)| *s <= step))
                     .map(|(_, z)| *z)
                     .unwrap_or(oldest)
             })
             .collect();
-        for i in 0..n {
+        let dt = self.params.dt_s;
+        let velocities = if in_window.len() < 2 {
+            self.velocities_drawn_by_weight(rng)
+        } else {
+            vec![Enu2::zeros(); n]
+        };
+        for (i, v) in velocities.iter().enumerate() {
             let tr = self.histories.track_mut(i);
             for (t, c) in slot_centre.iter().enumerate() {
-                let p = world.measurement.measure(c, rng);
+                let p = world.measurement.measure(c, rng) - v * ((k - 1 - t) as f64 * dt);
                 tr[2 * t] = p.x;
                 tr[2 * t + 1] = p.y;
             }
         }
         self.weights.fill(1.0 / n as f64);
+    }
+
+    /// One velocity per particle (world ENU, m/s), each a particle's mean velocity over its
+    /// history, the particle drawn by weight; each particle's own where the weights are
+    /// degenerate (all zero or not finite: a recovery).
+    fn velocities_drawn_by_weight<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<Enu2> {
+        let by_weight =
+            self.weights.iter().all(|w| w.is_finite()) && self.weights.iter().sum::<f64>() > 0.0;
+        (0..self.weights.len())
+            .map(|i| {
+                let j = if by_weight {
+                    self.draw_by_weight(rng)
+                } else {
+                    i
+                };
+                self.track_velocity(j)
+            })
+            .collect()
+    }
+
+    /// Track `i`'s mean velocity over its whole history, world ENU, m/s; zero when not
+    /// finite or when the history holds one position.
+    fn track_velocity(&self, i: usize) -> Enu2 {
+        let k = self.params.history_len;
+        if k < 2 {
+            return Enu2::zeros();
+        }
+        let v = (self.histories.newest(i) - self.histories.at(i, 0))
+            / ((k - 1) as f64 * self.params.dt_s);
+        if v.x.is_finite() && v.y.is_finite() {
+            v
+        } else {
+            Enu2::zeros()
+        }
     }
 
     /// Uniform positions over the workspace, each with a straight track at a speed drawn

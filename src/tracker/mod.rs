@@ -527,13 +527,14 @@ impl Tracker {
         }
     }
 
-    /// At each step without a measurement, a share of the particles (`injection_share`) is
-    /// replaced by hypotheses for the branches a constant-velocity particle cannot take: once
-    /// the target has been seen, road-following clones of the particles within a step of a
-    /// junction (`ParticleFilter::inject_road_followers`: the belief itself, so what the
-    /// agent has ruled out stays ruled out); before that, hypotheses on the roads around
-    /// the belief (within two standard deviations of its mean plus a second at the largest
-    /// speed).
+    /// At each step without a measurement, for a motion model that does not know the roads
+    /// (constant velocity, which drives straight on through a junction): once the target has
+    /// been seen, the particles at a junction are re-routed onto the roads they can take
+    /// (`ParticleFilter::reroute_at_junctions`: the belief itself, so what the agent has
+    /// ruled out stays ruled out); before that, a share of the particles
+    /// (`injection_share`) is replaced by hypotheses on the roads around the belief (within
+    /// two standard deviations of its mean plus a second at the largest speed). A share of
+    /// 0 turns both off.
     fn inject_where_it_can_be(&mut self) {
         let share = self.params.injection_share;
         let knows_roads = match &self.estimator {
@@ -551,7 +552,7 @@ impl Tracker {
         let seen = self.last_measurement.is_some();
         if let Estimator::Particle { pf, .. } = &mut self.estimator {
             if seen {
-                pf.inject_road_followers(&self.world, count, &mut self.rng_filter);
+                pf.reroute_at_junctions(&self.world, &mut self.rng_filter);
             } else {
                 pf.inject_on_roads(&self.world, region, count, speeds, &mut self.rng_filter);
             }

@@ -385,6 +385,39 @@ impl RoadPieces {
         self.pieces.iter().zip(self.weights.iter().copied())
     }
 
+    /// These pieces less those that run back against `heading` (more than ~154 degrees
+    /// from it: a U-turn), unless nothing else is left.
+    pub fn without_reversals(self, heading: &Enu2) -> RoadPieces {
+        let h = heading.norm();
+        if h <= 1e-9 {
+            return self;
+        }
+        let keep: Vec<bool> = self
+            .pieces
+            .iter()
+            .map(|(a, b)| {
+                let d = b - a;
+                d.norm() <= 1e-9 || d.dot(heading) / (d.norm() * h) > -0.9
+            })
+            .collect();
+        if !keep.iter().any(|k| *k) {
+            return self;
+        }
+        let mut out = RoadPieces {
+            pieces: Vec::new(),
+            weights: Vec::new(),
+            total: 0.0,
+        };
+        for ((piece, w), k) in self.pieces.into_iter().zip(self.weights).zip(keep) {
+            if k {
+                out.pieces.push(piece);
+                out.weights.push(w);
+            }
+        }
+        out.sum_total();
+        out
+    }
+
     /// A point drawn by weighted length and the unit direction of its road; `None` when
     /// there is no road.
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> Option<(Enu2, Enu2)> {
@@ -515,6 +548,30 @@ mod tests {
         }
         let share = on_east as f64 / 4000.0;
         assert!((share - 0.6).abs() < 0.03, "east share {share}");
+    }
+
+    #[test]
+    fn a_reversal_is_left_out_unless_it_is_the_only_way_on() {
+        // Outdoor: 2 m before node 6 (600, 400) driving north on 1 -> 6; from 6 the roads go
+        // on north to 4 (p 0.7) or back south to 1 (p 0.3, a U-turn).
+        let road = outdoor_road();
+        let north = Enu2::new(0.0, 10.0);
+        let ahead = road.reachable_from(&Enu2::new(600.0, 398.0), Some(north), (0.0, 5.0));
+        let heads_south = |r: &RoadPieces| r.pieces().any(|((a, b), _)| b.y < a.y - 1e-9);
+        assert!(heads_south(&ahead), "the graph allows the U-turn");
+        let on = ahead.without_reversals(&north);
+        assert!(!heads_south(&on));
+        assert!(on.pieces().any(|((a, _), _)| a.y >= 400.0 - 1e-9));
+        assert!(
+            (on.length_m() - (2.0 + 0.7 * 3.0)).abs() < 1e-6,
+            "{}",
+            on.length_m()
+        );
+        // Every piece against the heading: nothing else is left, so they stay.
+        let back = road.reachable_from(&Enu2::new(600.0, 200.0), Some(-north), (0.0, 5.0));
+        let kept = back.length_m();
+        assert!((back.without_reversals(&north).length_m() - kept).abs() < 1e-9);
+        assert!(kept > 0.0);
     }
 
     #[test]

@@ -208,6 +208,57 @@ fn a_far_measurement_reseeds_instead_of_underflowing() {
 }
 
 #[test]
+fn a_reseed_through_one_measurement_keeps_the_weighted_belief_of_the_velocity() {
+    // Outdoor world: half the particles drive east at 12 m/s and carry all the weight,
+    // half drive west; the target comes back into view at (400, 0) after a gap, so the
+    // window holds that one measurement. The re-seeded tracks end at the measurement and
+    // drive east at 12 m/s (before session 23 they stood still).
+    let c = outdoor();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(11);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let n = pf.weights().len();
+    let k = c.filter.history_len;
+    let dt = c.filter_dt_s();
+    for i in 0..n {
+        let vx = if i % 2 == 0 { 12.0 } else { -12.0 };
+        let tr = pf.histories.track_mut(i);
+        for t in 0..k {
+            tr[2 * t] = 380.0 - vx * (k - 1 - t) as f64 * dt;
+            tr[2 * t + 1] = 0.0;
+        }
+        pf.weights[i] = if i % 2 == 0 { 2.0 / n as f64 } else { 0.0 };
+    }
+    let z = Enu2::new(400.0, 0.0);
+    pf.recent.push_back((pf.step_index, z));
+    pf.reseed_around_measurements(&world, &mut rng);
+    let mean_v = (0..n).map(|i| pf.track_velocity(i)).sum::<Enu2>() / n as f64;
+    assert!(
+        (mean_v - Enu2::new(12.0, 0.0)).norm() < 0.5,
+        "mean velocity {mean_v:?}"
+    );
+    assert!((0..n).all(|i| (pf.particle(i) - z).norm() < 10.0));
+    assert!((0..n).all(|i| pf.track_velocity(i).x > 6.0));
+    // With two measurements in the window the tracks follow the measurements instead:
+    // 3 m apart over one step, 9 m/s. (At the filter's first steps, as here, the slots
+    // before its first step take the oldest measurement.)
+    pf.step_index += 1;
+    pf.recent
+        .push_back((pf.step_index, z + Enu2::new(3.0, 0.0)));
+    pf.reseed_around_measurements(&world, &mut rng);
+    let last_step = (0..n)
+        .map(|i| pf.histories.newest(i) - pf.histories.at(i, k - 2))
+        .sum::<Enu2>()
+        / n as f64;
+    assert!((last_step.x - 3.0).abs() < 0.5, "last step {last_step:?}");
+    let older = (0..n)
+        .map(|i| pf.histories.at(i, k - 2) - pf.histories.at(i, 0))
+        .sum::<Enu2>()
+        / n as f64;
+    assert!(older.norm() < 0.5, "slots before the newest: {older:?}");
+}
+
+#[test]
 fn history_length_mismatch_is_a_clear_error() {
     struct NeedsTen;
     impl MotionModel for NeedsTen {
@@ -285,9 +336,10 @@ fn a_blind_step_predicts_without_negative_information() {
 }
 
 #[test]
-fn road_followers_take_the_branches_only_at_a_junction() {
+fn particles_at_a_junction_are_rerouted_onto_its_branches_and_only_there() {
     // Outdoor world: every particle 2 m before node 1 (600, 0) driving east at 10 m/s;
-    // one step (3.3 m) takes them through the junction: clones go east (0.6) or north (0.4).
+    // one step (3.3 m) takes them through the junction: each is re-routed east (0.6) or
+    // north (0.4), at its own speed, keeping its weight.
     let c = outdoor();
     let world = c.world();
     let mut rng = CoreRng::seed_from_u64(5);
@@ -306,31 +358,36 @@ fn road_followers_take_the_branches_only_at_a_junction() {
         h
     };
     pf.histories = at(598.0);
-    pf.inject_road_followers(&world, 300, &mut rng);
-    // Clones are spread over the step: 2 m before the junction, 1.33 m after it on each
-    // branch; past the junction the branches share the clones as 0.4 to 0.6.
+    pf.weights
+        .iter_mut()
+        .enumerate()
+        .for_each(|(i, w)| *w = (1 + i % 3) as f64);
+    let weights_before = pf.weights().to_vec();
+    pf.reroute_at_junctions(&world, &mut rng);
+    // They are spread over the step: 2 m before the junction, 1.33 m after it on each
+    // branch; past the junction the branches share them as 0.4 to 0.6.
     let north = (0..n).filter(|&i| pf.particle(i).y > 1e-6).count();
     let east = (0..n)
         .filter(|&i| pf.particle(i).x > 600.0 && pf.particle(i).y.abs() < 1e-6)
         .count();
     let share = north as f64 / (north + east) as f64;
     assert!(
-        north + east > 40,
-        "clones past the junction: {}",
+        north + east > n / 3,
+        "particles past the junction: {}",
         north + east
     );
     assert!(
         (share - 0.4).abs() < 0.15,
         "north share {share} ({north} / {east})"
     );
-    // Every clone is on the road.
+    // Every particle is on the road, at its speed, with its weight.
     assert!((0..n).all(|i| world.road.distance_to_roads(&pf.particle(i)) < 1e-6));
-    let total: f64 = pf.weights().iter().sum();
-    assert!((total - 1.0).abs() < 1e-9);
-    // Mid-edge (far from any junction): no clone at all, the particles stay as they were.
+    assert!((0..n).all(|i| (pf.track_velocity(i).norm() - 10.0).abs() < 1e-6));
+    assert_eq!(pf.weights(), &weights_before[..]);
+    // Mid-edge (far from any junction): the particles stay as they were.
     pf.histories = at(300.0);
     let before: Vec<Enu2> = (0..n).map(|i| pf.particle(i)).collect();
-    pf.inject_road_followers(&world, 300, &mut rng);
+    pf.reroute_at_junctions(&world, &mut rng);
     assert!((0..n).all(|i| pf.particle(i) == before[i]));
 }
 
