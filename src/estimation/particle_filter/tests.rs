@@ -231,7 +231,7 @@ fn a_reseed_through_one_measurement_keeps_the_weighted_belief_of_the_velocity() 
     }
     let z = Enu2::new(400.0, 0.0);
     pf.recent.push_back((pf.step_index, z));
-    pf.reseed_around_measurements(&world, &mut rng);
+    pf.reseed_around_measurements(&world, true, &mut rng);
     let mean_v = (0..n).map(|i| pf.track_velocity(i)).sum::<Enu2>() / n as f64;
     assert!(
         (mean_v - Enu2::new(12.0, 0.0)).norm() < 0.5,
@@ -245,7 +245,7 @@ fn a_reseed_through_one_measurement_keeps_the_weighted_belief_of_the_velocity() 
     pf.step_index += 1;
     pf.recent
         .push_back((pf.step_index, z + Enu2::new(3.0, 0.0)));
-    pf.reseed_around_measurements(&world, &mut rng);
+    pf.reseed_around_measurements(&world, true, &mut rng);
     let last_step = (0..n)
         .map(|i| pf.histories.newest(i) - pf.histories.at(i, k - 2))
         .sum::<Enu2>()
@@ -256,6 +256,13 @@ fn a_reseed_through_one_measurement_keeps_the_weighted_belief_of_the_velocity() 
         .sum::<Enu2>()
         / n as f64;
     assert!(older.norm() < 0.5, "slots before the newest: {older:?}");
+    // A model that knows the roads (the DMMN) keeps the tracks through one measurement at
+    // rest, as before.
+    pf.recent.clear();
+    pf.recent.push_back((pf.step_index, z));
+    pf.reseed_around_measurements(&world, false, &mut rng);
+    let at_rest = (0..n).map(|i| pf.track_velocity(i)).sum::<Enu2>() / n as f64;
+    assert!(at_rest.norm() < 0.5, "mean velocity {at_rest:?}");
 }
 
 #[test]
