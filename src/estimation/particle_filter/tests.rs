@@ -24,6 +24,26 @@ fn outdoor() -> Config {
     .unwrap()
 }
 
+/// `n` straight tracks of `k` positions, `dt_s` apart, along outdoor's y = 0, each ending at
+/// `end_x` (m) and driving east at `speed_east(i)` m/s (negative: west).
+fn tracks_along_y0(
+    n: usize,
+    k: usize,
+    dt_s: f64,
+    end_x: f64,
+    speed_east: impl Fn(usize) -> f64,
+) -> Histories {
+    let mut h = Histories::new(n, k);
+    for i in 0..n {
+        let tr = h.track_mut(i);
+        for t in 0..k {
+            tr[2 * t] = end_x - (k - 1 - t) as f64 * speed_east(i) * dt_s;
+            tr[2 * t + 1] = 0.0;
+        }
+    }
+    h
+}
+
 fn mass_inside(pf: &ParticleFilter, world: &World, agent: &Enu2) -> f64 {
     (0..pf.weights().len())
         .filter(|&i| world.is_visible(agent, &pf.particle(i)))
@@ -220,14 +240,9 @@ fn a_reseed_through_one_measurement_keeps_the_weighted_belief_of_the_velocity() 
     let n = pf.weights().len();
     let k = c.filter.history_len;
     let dt = c.filter_dt_s();
-    for i in 0..n {
-        let vx = if i % 2 == 0 { 12.0 } else { -12.0 };
-        let tr = pf.histories.track_mut(i);
-        for t in 0..k {
-            tr[2 * t] = 380.0 - vx * (k - 1 - t) as f64 * dt;
-            tr[2 * t + 1] = 0.0;
-        }
-        pf.weights[i] = if i % 2 == 0 { 2.0 / n as f64 } else { 0.0 };
+    pf.histories = tracks_along_y0(n, k, dt, 380.0, |i| [12.0, -12.0][i % 2]);
+    for (i, w) in pf.weights.iter_mut().enumerate() {
+        *w = if i % 2 == 0 { 2.0 / n as f64 } else { 0.0 };
     }
     let z = Enu2::new(400.0, 0.0);
     pf.recent.push_back((pf.step_index, z));
@@ -352,18 +367,7 @@ fn particles_at_a_junction_are_rerouted_onto_its_branches_and_only_there() {
     let mut rng = CoreRng::seed_from_u64(5);
     let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
     let n = pf.weights().len();
-    let at = |x: f64| {
-        let mut h = Histories::new(n, c.filter.history_len);
-        for i in 0..n {
-            let tr = h.track_mut(i);
-            for t in 0..c.filter.history_len {
-                let back = (c.filter.history_len - 1 - t) as f64;
-                tr[2 * t] = x - back * 10.0 / 3.0;
-                tr[2 * t + 1] = 0.0;
-            }
-        }
-        h
-    };
+    let at = |x: f64| tracks_along_y0(n, c.filter.history_len, c.filter_dt_s(), x, |_| 10.0);
     pf.histories = at(598.0);
     pf.weights
         .iter_mut()
@@ -409,16 +413,7 @@ fn one_way_road_tracks() -> (Config, World, ParticleFilter) {
     let n = pf.weights().len();
     let k = c.filter.history_len;
     let dt = c.filter_dt_s();
-    let mut h = Histories::new(n, k);
-    for i in 0..n {
-        let speed_east = [10.0, -10.0, -0.3][i % 3];
-        let tr = h.track_mut(i);
-        for t in 0..k {
-            tr[2 * t] = 300.0 - (k - 1 - t) as f64 * speed_east * dt;
-            tr[2 * t + 1] = 0.0;
-        }
-    }
-    pf.histories = h;
+    pf.histories = tracks_along_y0(n, k, dt, 300.0, |i| [10.0, -10.0, -0.3][i % 3]);
     pf.set_weights(&vec![1.0; n]);
     (c, world, pf)
 }
