@@ -114,7 +114,9 @@ pub struct FilterCounters {
 /// Where the routes of [`ParticleFilter::spread_along_routes`] start.
 #[derive(Debug, Clone, Copy)]
 pub enum RouteStart<'a> {
-    /// Where the target was last measured, with the way it was driving (world ENU).
+    /// Where the target was last measured, with the way it was driving (world ENU); each
+    /// route starts at its own draw of where the target was, the measurement give or take
+    /// its noise.
     At(Enu2, Option<Enu2>),
     /// A point drawn on these roads by length for each route, driving along its road (the
     /// operator's cue before the target has been seen).
@@ -254,7 +256,14 @@ impl ParticleFilter {
         let mut at = vec![Enu2::zeros(); times.len()];
         for (i, lw) in log_w.iter_mut().enumerate() {
             let (from, heading) = match start {
-                RouteStart::At(p, heading) => (p, heading),
+                // Where the target was is the measurement give or take its noise: each
+                // route starts at its own draw. From the measurement itself, every route
+                // shared one start, and a car last measured a few metres short of an
+                // occlusion left every route the first empty frame would have seen
+                // refuted at 1e-6 except the fastest few: the re-spread put all the weight
+                // on ~1 % of the routes, at the top speed, and ran ahead of the car
+                // (BENCHMARKS "Field scale, part 22").
+                RouteStart::At(z, heading) => (z + world.measurement.noise.sample(rng), heading),
                 RouteStart::On(roads) => match roads.sample(rng) {
                     Some((p, dir)) => (p, Some(dir)),
                     None => return false,

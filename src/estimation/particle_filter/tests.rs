@@ -514,3 +514,49 @@ fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
     assert!(north > 0.99 && east < 1e-3, "{north} {east}");
     assert!((pf.weights().iter().sum::<f64>() - 1.0).abs() < 1e-9);
 }
+
+/// The weighted share of the particles whose last step is slower than `mps`.
+fn weight_slower_than(pf: &ParticleFilter, mps: f64, dt_s: f64) -> f64 {
+    let h = pf.histories();
+    let k = h.k_in();
+    (0..pf.weights().len())
+        .filter(|&i| (h.newest(i) - h.at(i, k - 2)).norm() / dt_s < mps)
+        .map(|i| pf.weights()[i])
+        .sum()
+}
+
+#[test]
+fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
+    // field-grid's overpass covers x 470-530 on the road y = 0. The car was last measured
+    // 4 m short of it, driving east; the camera over that point saw nothing a third of a
+    // second later. At 7-13 m/s a car starting exactly at the measurement is still in view
+    // then unless it drives faster than 12 m/s; one starting where the measurement's noise
+    // (1 m) puts it may be under the overpass already at any of those speeds.
+    let c = field_grid();
+    let world = c.world();
+    let dt = c.filter_params().dt_s;
+    let mut rng = CoreRng::seed_from_u64(5);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let z = Enu2::new(466.0, 0.0);
+    let start = RouteStart::At(z, Some(Enu2::new(10.0, 0.0)));
+    // Two seconds on, every route is under the overpass, short of its junction at x = 500.
+    let looked: Vec<(f64, Enu2)> = (1..=6).map(|j| (j as f64 / 3.0, z)).collect();
+    assert!(pf.spread_along_routes(&world, start, 7.0..=13.0, 2.0, &looked, &mut rng));
+    let slower = weight_slower_than(&pf, 11.0, dt);
+    assert!(slower > 0.2, "weight on routes under 11 m/s: {slower}");
+    let n_eff = 1.0 / pf.weights().iter().map(|w| w * w).sum::<f64>();
+    assert!(n_eff > 0.1 * pf.weights().len() as f64, "N_eff {n_eff}");
+    // What the first frame saw stays ruled out: the history's fifth slot is where each
+    // route was then (2 s driven, ten slots a third of a second apart, the first ones at
+    // the start).
+    let h = pf.histories();
+    assert_eq!((h.k_in(), dt), (10, 1.0 / 3.0));
+    let mut refuted = 0;
+    for (i, w) in pf.weights().iter().enumerate() {
+        if world.is_visible(&z, &h.at(i, 4)) {
+            refuted += 1;
+            assert!(*w < 1e-6, "{} {w}", h.at(i, 1));
+        }
+    }
+    assert!(refuted > 100, "{refuted} routes in the first frame's view");
+}
