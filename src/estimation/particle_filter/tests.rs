@@ -544,7 +544,7 @@ fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
     assert!(pf.spread_along_routes(&world, start, 7.0..=13.0, 2.0, &looked, &mut rng));
     let slower = weight_slower_than(&pf, 11.0, dt);
     assert!(slower > 0.2, "weight on routes under 11 m/s: {slower}");
-    let n_eff = 1.0 / pf.weights().iter().map(|w| w * w).sum::<f64>();
+    let n_eff = pf.n_eff();
     assert!(n_eff > 0.1 * pf.weights().len() as f64, "N_eff {n_eff}");
     // What the first frame saw stays ruled out: the history's fifth slot is where each
     // route was then (2 s driven, ten slots a third of a second apart, the first ones at
@@ -555,7 +555,7 @@ fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
     for (i, w) in pf.weights().iter().enumerate() {
         if world.is_visible(&z, &h.at(i, 4)) {
             refuted += 1;
-            assert!(*w < 1e-6, "{} {w}", h.at(i, 1));
+            assert!(*w < 1e-6, "{} {w}", h.at(i, 4));
         }
     }
     assert!(refuted > 100, "{refuted} routes in the first frame's view");
