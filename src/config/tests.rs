@@ -246,7 +246,16 @@ fn sizes_and_rates_that_would_exhaust_the_companion_are_refused_naming_the_key()
     })
     .unwrap_err();
     expect_invalid(err, "timing.duration_s");
-    for shipped in ["outdoor", "field-ring", "px4", "ardupilot", "default"] {
+    for shipped in [
+        "outdoor",
+        "field-ring",
+        "field-grid",
+        "field-eight",
+        "field-hill",
+        "px4",
+        "ardupilot",
+        "default",
+    ] {
         let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("config/{shipped}.toml"));
         Config::load(&p).unwrap_or_else(|e| panic!("{shipped}: {e}"));
     }

@@ -52,6 +52,13 @@ pub struct RoadNode {
     pub next: Vec<(usize, f64)>,
 }
 
+/// Which edges count as near a point for a heading to choose among
+/// ([`RoadNetwork::reachable_from`], [`RoadNetwork::drive`]): those within twice the nearest
+/// edge's distance plus this share of the network's shortest edge (the roads that meet at a
+/// junction, or run both ways along one line, are equally near; a road elsewhere in the
+/// network is not).
+pub const NEAR_EDGE_SHARE: f64 = 0.05;
+
 /// Road network, indexed densely; configuration ids are kept for reports.
 #[derive(Debug, Clone)]
 pub struct RoadNetwork {
@@ -248,10 +255,13 @@ impl RoadNetwork {
     }
 
     /// The edge (from-node, to-node indices) nearest to `p` and the distance along it of
-    /// `p`'s projection; edges heading against `heading` count only when no other is near.
+    /// `p`'s projection. With a `heading`, the edge is chosen among the near ones (see
+    /// [`NEAR_EDGE_SHARE`]) by how well it agrees with the heading: edges heading against
+    /// it count only when no other is near.
     fn nearest_edge(&self, p: &Enu2, heading: Option<Enu2>) -> Option<(usize, usize, f64)> {
         let heading = heading.filter(|h| h.norm() > 1e-9).map(|h| h.normalize());
-        let mut best: Option<(f64, (usize, usize, f64))> = None;
+        let mut edges = Vec::new();
+        let mut shortest = f64::INFINITY;
         for (u, node) in self.nodes.iter().enumerate() {
             for &(v, _) in &node.next {
                 let a = node.position_enu;
@@ -260,20 +270,30 @@ impl RoadNetwork {
                 if len <= 1e-9 {
                     continue;
                 }
+                shortest = shortest.min(len);
                 let dir = d / len;
                 let s = (p - a).dot(&dir).clamp(0.0, len);
-                let mut cost = (a + dir * s - p).norm();
-                if let Some(h) = heading {
-                    // Across or against the heading: as if up to 2 km farther away (a
-                    // 5-degree difference costs 4 m, a crossing road 1 km).
-                    cost += (1.0 - dir.dot(&h)) * 1e3;
-                }
-                if best.map_or(true, |(c, _)| cost < c) {
-                    best = Some((cost, (u, v, s)));
-                }
+                edges.push(((a + dir * s - p).norm(), dir, (u, v, s)));
             }
         }
-        best.map(|(_, e)| e)
+        let nearest = edges.iter().map(|e| e.0).fold(f64::INFINITY, f64::min);
+        // The heading chooses only among the edges about as near as the nearest: with it
+        // weighed against any distance (before session 25, a 90-degree difference as 1 km),
+        // a slow track 10 m short of a junction whose velocity's noise pointed east was put
+        // on the start of an east-going road 390 m back, and a track just past a gentle bend
+        // back on the road before it, 58 m behind (BENCHMARKS "Field scale, part 23").
+        let near = 2.0 * nearest + NEAR_EDGE_SHARE * shortest;
+        let cost = |(dist, dir, _): &(f64, Enu2, (usize, usize, f64))| match heading {
+            // Across or against the heading: as if up to 2 km farther away (a 5-degree
+            // difference costs 4 m, a crossing road 1 km).
+            Some(h) => dist + (1.0 - dir.dot(&h)) * 1e3,
+            None => *dist,
+        };
+        edges
+            .iter()
+            .filter(|e| e.0 <= near)
+            .min_by(|a, b| cost(a).total_cmp(&cost(b)))
+            .map(|e| e.2)
     }
 
     /// Collects the part of edge u->v (from `s0` metres along it, `travelled` metres of path
@@ -593,6 +613,64 @@ mod tests {
         assert!(off.length_m() > 0.0);
     }
 
+    /// A loop 0 -> 1 -> 2 with a gentle bend at 1 (14 degrees in, 11 out) and a chord 1 -> 5
+    /// north, 5 -> 0 back south-west: the geometry of the track jumps BENCHMARKS "Field
+    /// scale, part 23" found.
+    fn rng() -> rand_chacha::ChaCha8Rng {
+        rand_chacha::ChaCha8Rng::seed_from_u64(25)
+    }
+
+    fn bend_and_chord() -> RoadNetwork {
+        network(
+            &[
+                (0, 0.0, 0.0),
+                (1, 400.0, 100.0),
+                (2, 900.0, 0.0),
+                (5, 400.0, 500.0),
+            ],
+            &[
+                (0, 1, 1.0),
+                (1, 2, 0.6),
+                (1, 5, 0.4),
+                (2, 0, 1.0),
+                (5, 0, 1.0),
+            ],
+        )
+    }
+
+    #[test]
+    fn a_heading_never_moves_a_point_to_a_far_road() {
+        let road = bend_and_chord();
+        // Where `drive` places a point with a heading, and its road's direction.
+        let place = |x: f64, y: f64, heading: Enu2| {
+            road.drive(&Enu2::new(x, y), Some(heading), &[0.0], &mut rng())
+                .unwrap()[0]
+        };
+        // 10 m short of node 5 on 1 -> 5, standing (a car turning in place), its velocity's
+        // noise pointing east, along 1 -> 2 390 m away: it stays on 1 -> 5.
+        let (p, dir) = place(402.0, 490.0, Enu2::new(1.1, 0.6));
+        assert!((p - Enu2::new(400.0, 490.0)).norm() < 1e-6, "{p:?}");
+        assert!((dir - Enu2::new(0.0, 1.0)).norm() < 1e-9, "{dir:?}");
+        // 58 m past the bend on 1 -> 2 heading east-north-east, closer in direction to 0 -> 1
+        // than to 1 -> 2: it stays where it is, not at the bend behind it.
+        let (p, _) = place(458.0, 93.0, Enu2::new(12.3, 2.0));
+        assert!(
+            p.x > 450.0 && (p - Enu2::new(458.0, 93.0)).norm() < 5.0,
+            "{p:?}"
+        );
+        let ahead = road.reachable_from(
+            &Enu2::new(458.0, 93.0),
+            Some(Enu2::new(12.3, 2.0)),
+            (0.0, 4.0),
+        );
+        assert!(ahead.pieces().all(|((a, _), _)| a.x > 450.0), "{ahead:?}");
+        // Where two roads are about as near, the heading still chooses: at node 1, east is
+        // 1 -> 2 and north 1 -> 5.
+        let (_, east) = place(401.0, 101.0, Enu2::new(1.0, -0.2));
+        let (_, north) = place(401.0, 101.0, Enu2::new(0.0, 1.0));
+        assert!(east.x > 0.9 && north.y > 0.99, "{east:?} {north:?}");
+    }
+
     #[test]
     fn transitions_follow_their_probabilities() {
         let road = RoadNetwork::from_config(&Config::default_lab().road);
@@ -665,16 +743,28 @@ mod tests {
     /// A fork: 0 -> 1 east, then at 1 an even choice of 2 (east, a dead end) or 3 (north,
     /// a dead end).
     fn fork() -> RoadNetwork {
-        let node = |id, x_m, y_m| NodeConfig { id, x_m, y_m };
-        let edge = |from, to, p| EdgeConfig { from, to, p };
-        RoadNetwork::from_config(&RoadConfig {
-            nodes: vec![
-                node(0, 0.0, 0.0),
-                node(1, 100.0, 0.0),
-                node(2, 200.0, 0.0),
-                node(3, 100.0, 100.0),
+        network(
+            &[
+                (0, 0.0, 0.0),
+                (1, 100.0, 0.0),
+                (2, 200.0, 0.0),
+                (3, 100.0, 100.0),
             ],
-            edges: vec![edge(0, 1, 1.0), edge(1, 2, 0.5), edge(1, 3, 0.5)],
+            &[(0, 1, 1.0), (1, 2, 0.5), (1, 3, 0.5)],
+        )
+    }
+
+    /// A network from `(id, x, y)` nodes and `(from, to, p)` edges, starting at node 0.
+    fn network(nodes: &[(u32, f64, f64)], edges: &[(u32, u32, f64)]) -> RoadNetwork {
+        RoadNetwork::from_config(&RoadConfig {
+            nodes: nodes
+                .iter()
+                .map(|&(id, x_m, y_m)| NodeConfig { id, x_m, y_m })
+                .collect(),
+            edges: edges
+                .iter()
+                .map(|&(from, to, p)| EdgeConfig { from, to, p })
+                .collect(),
             start_node: 0,
         })
     }
