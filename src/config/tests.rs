@@ -252,6 +252,7 @@ fn sizes_and_rates_that_would_exhaust_the_companion_are_refused_naming_the_key()
         "field-grid",
         "field-eight",
         "field-hill",
+        "field-twin",
         "px4",
         "ardupilot",
         "default",

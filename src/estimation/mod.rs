@@ -3,6 +3,7 @@
 
 pub mod kalman;
 pub mod particle_filter;
+pub mod road_following;
 
 pub use kalman::{KalmanFilter, KalmanParams};
 pub use particle_filter::{

@@ -10,6 +10,7 @@ use rand::Rng;
 use rand_distr::{Distribution, Exp1, StandardNormal};
 use thiserror::Error;
 
+use super::road_following;
 use crate::motion::{Histories, MotionError, MotionModel};
 use crate::world::geometry::{BoundsEnu, Enu2};
 use crate::world::measurement::Gaussian2;
@@ -320,26 +321,10 @@ impl ParticleFilter {
     /// piece ahead, or two with the straight-on step within half a road sigma of a road:
     /// a bend it follows anyway) is left alone. Nothing without roads.
     pub fn reroute_at_junctions<R: Rng + ?Sized>(&mut self, world: &World, rng: &mut R) {
-        let n = self.weights.len();
-        if n == 0 || self.params.history_len < 2 || world.road.nodes.is_empty() {
-            return;
-        }
         let dt = self.params.dt_s;
         let on_road_m = 0.5 * self.params.road_sigma_m.unwrap_or(0.0);
-        for i in 0..n {
-            let p = self.histories.newest(i);
-            let v = self.track_velocity(i);
-            let speed = v.norm();
-            let roads = world
-                .road
-                .reachable_from(&p, Some(v), (0.0, speed * dt))
-                .without_reversals(&v);
-            let pieces = roads.pieces().count();
-            let follows_its_road = pieces < 2
-                || (pieces == 2 && world.road.distance_to_roads(&(p + v * dt)) <= on_road_m);
-            if !follows_its_road {
-                self.seed_on_roads(i, &roads, speed..=speed, rng);
-            }
+        for i in 0..self.weights.len() {
+            road_following::reroute_track(&mut self.histories, i, world, dt, on_road_m, rng);
         }
     }
 
@@ -423,19 +408,8 @@ impl ParticleFilter {
         speeds_mps: std::ops::RangeInclusive<f64>,
         rng: &mut R,
     ) -> bool {
-        let Some((p, dir)) = roads.sample(rng) else {
-            return false;
-        };
-        let k = self.params.history_len;
-        let speed = rng.gen_range(speeds_mps);
-        let v_step = dir * speed * self.params.dt_s;
-        let tr = self.histories.track_mut(i);
-        for t in 0..k {
-            let q = p - v_step * (k - 1 - t) as f64;
-            tr[2 * t] = q.x;
-            tr[2 * t + 1] = q.y;
-        }
-        true
+        let dt = self.params.dt_s;
+        road_following::straight_track_on_roads(&mut self.histories, i, roads, speeds_mps, dt, rng)
     }
 
     /// Starts over with no information: on the roads or over the workspace (see
@@ -883,17 +857,7 @@ impl ParticleFilter {
     /// Track `i`'s mean velocity over its whole history, world ENU, m/s; zero when not
     /// finite or when the history holds one position.
     fn track_velocity(&self, i: usize) -> Enu2 {
-        let k = self.params.history_len;
-        if k < 2 {
-            return Enu2::zeros();
-        }
-        let v = (self.histories.newest(i) - self.histories.at(i, 0))
-            / ((k - 1) as f64 * self.params.dt_s);
-        if v.x.is_finite() && v.y.is_finite() {
-            v
-        } else {
-            Enu2::zeros()
-        }
+        road_following::track_velocity(&self.histories, i, self.params.dt_s)
     }
 
     /// Uniform positions over the workspace, each with a straight track at a speed drawn

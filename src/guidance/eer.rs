@@ -36,7 +36,7 @@
 use rand::Rng;
 
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
-use crate::estimation::ParticleFilter;
+use crate::estimation::{road_following, ParticleFilter};
 use crate::motion::{Histories, MotionError, MotionModel};
 use crate::world::geometry::Enu2;
 use crate::world::measurement::Gaussian2;
@@ -508,6 +508,7 @@ pub struct EerPlanner {
     inputs: EerInputs,
     scratch: EerScratch,
     intercepts_on: bool,
+    rollout_on_roads_m: Option<f64>,
 }
 
 impl EerPlanner {
@@ -516,6 +517,15 @@ impl EerPlanner {
     /// the paper's.
     pub fn use_intercepts(&mut self, on: bool) {
         self.intercepts_on = on;
+    }
+
+    /// Whether the rollout's tracks are re-routed at junctions at each step
+    /// ([`road_following::reroute_track`], with `on_road_m` its tolerance for a bend), as the
+    /// filter re-routes its constant-velocity belief: the tracker turns it on when the filter
+    /// does, so that EER plans with the prediction the filter makes. `None`: the motion
+    /// model's rollout alone (the paper's).
+    pub fn reroute_rollout(&mut self, on_road_m: Option<f64>) {
+        self.rollout_on_roads_m = on_road_m;
     }
 
     /// A planner with these parameters.
@@ -528,6 +538,7 @@ impl EerPlanner {
             inputs: EerInputs::default(),
             scratch: EerScratch::default(),
             intercepts_on: true,
+            rollout_on_roads_m: None,
         }
     }
 
@@ -576,6 +587,12 @@ impl EerPlanner {
         pf.histories().gather_into(&self.indices, &mut self.rollout);
         self.next.resize(self.indices.len(), Enu2::zeros());
         for _ in 0..self.params.horizon_steps {
+            if let Some(on_road_m) = self.rollout_on_roads_m {
+                for i in 0..self.indices.len() {
+                    let dt = self.params.step_s;
+                    road_following::reroute_track(&mut self.rollout, i, world, dt, on_road_m, rng);
+                }
+            }
             model.predict(&self.rollout, &mut self.next)?;
             for (i, p) in self.next.iter_mut().enumerate() {
                 if !(p.x.is_finite() && p.y.is_finite()) {

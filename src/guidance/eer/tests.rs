@@ -2,6 +2,7 @@ use crate::config::Config;
 use rand::{Rng, SeedableRng};
 
 use super::*;
+use crate::estimation::RouteStart;
 use crate::motion::ConstantVelocity;
 use crate::rng::CoreRng;
 
@@ -414,5 +415,48 @@ fn far_candidates_are_where_the_agent_meets_the_particles() {
         best < 40 && cands[best].x > 800.0,
         "{best}: {}",
         cands[best]
+    );
+}
+
+/// With the rollout re-routed at junctions (as the filter re-routes its constant-velocity
+/// belief), the tracks that reach outdoor's junction at (600, 0) take its branches, east
+/// (p 0.6) and north (p 0.4); without, they all drive straight on east.
+#[test]
+fn a_rerouted_rollout_takes_the_junctions_branches() {
+    let c = Config::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/outdoor.toml"
+    )))
+    .unwrap();
+    let world = c.world();
+    let params = c.filter_params();
+    let dt = params.dt_s;
+    let mut rng = CoreRng::seed_from_u64(31);
+    let mut pf = ParticleFilter::new(params, c.workspace_enu, &mut rng);
+    // Every track on 0 -> 1, 10 m/s east, 10 m short of the junction after 3 s.
+    let start = RouteStart::At(Enu2::new(560.0, 0.0), Some(Enu2::new(10.0, 0.0)));
+    assert!(pf.spread_along_routes(&world, start, 10.0..=10.0, 3.0, &[], &mut rng));
+    let mut eer = c.eer_params();
+    // 4 s: 1 s to the junction, then 30 m along a branch (the rollout's noise is ~6 m).
+    eer.horizon_steps = 12;
+    let north_share = |on_road_m: Option<f64>| {
+        let mut planner = EerPlanner::new(eer.clone());
+        planner.reroute_rollout(on_road_m);
+        let mut cv = ConstantVelocity::new(c.motion.cv_max_speed_mps, dt);
+        let mut rng = CoreRng::seed_from_u64(32);
+        let inp = planner.prepare(&pf, &mut cv, &world, &mut rng).unwrap();
+        let north = inp.predicted.iter().filter(|p| p.y > 15.0).count();
+        north as f64 / inp.predicted.len() as f64
+    };
+    // Straight on, only the rollout's noise reaches 15 m north.
+    let straight = north_share(None);
+    let share = north_share(Some(0.5 * c.filter_params().road_sigma_m.unwrap_or(0.0)));
+    assert!(straight < 0.08, "north share, straight on: {straight}");
+    // Re-routed: the north branch's share (0.4 of the tracks the junction re-routes; a track
+    // the rollout's noise has carried within a metre of the east road already counts as on
+    // it and drives on).
+    assert!(
+        share > straight + 0.1 && share < 0.45,
+        "north share, re-routed: {share}"
     );
 }

@@ -1,0 +1,82 @@
+//! Constant-velocity tracks through junctions: a track whose next straight step leaves its
+//! road is put on one of the roads it can take within that step. The particle filter applies
+//! it to its belief at each step without a measurement, and EER's rollout to its predicted
+//! tracks at each of its steps, so the planner predicts as the filter does.
+
+use rand::Rng;
+
+use crate::motion::Histories;
+use crate::world::geometry::Enu2;
+use crate::world::road::RoadPieces;
+use crate::world::World;
+
+/// Track `i`'s velocity over its whole kept history, m/s, world ENU (zero for a track of one
+/// position, a zero period or a non-finite difference).
+pub fn track_velocity(histories: &Histories, i: usize, dt_s: f64) -> Enu2 {
+    let k = histories.k_in();
+    if k < 2 || dt_s <= 0.0 {
+        return Enu2::zeros();
+    }
+    let v = (histories.newest(i) - histories.at(i, 0)) / ((k - 1) as f64 * dt_s);
+    if v.x.is_finite() && v.y.is_finite() {
+        v
+    } else {
+        Enu2::zeros()
+    }
+}
+
+/// Track `i` becomes a straight track along one of `roads`, ending at a point drawn on them
+/// (by weighted length), at a speed drawn from `speeds_mps`; false (unchanged) when there is
+/// no road.
+pub fn straight_track_on_roads<R: Rng + ?Sized>(
+    histories: &mut Histories,
+    i: usize,
+    roads: &RoadPieces,
+    speeds_mps: std::ops::RangeInclusive<f64>,
+    dt_s: f64,
+    rng: &mut R,
+) -> bool {
+    let Some((p, dir)) = roads.sample(rng) else {
+        return false;
+    };
+    let speed = rng.gen_range(speeds_mps);
+    let k = histories.k_in();
+    let v_step = dir * speed * dt_s;
+    let tr = histories.track_mut(i);
+    for t in 0..k {
+        let q = p - v_step * (k - 1 - t) as f64;
+        tr[2 * t] = q.x;
+        tr[2 * t + 1] = q.y;
+    }
+    true
+}
+
+/// Re-routes track `i` if its next straight step (at its track velocity, over `dt_s`) leaves
+/// its road at a junction: it is put on one of the roads it can take within that step (the
+/// turns drawn by their probabilities, never a U-turn back the way it came unless there is
+/// no other way on), keeping its speed. A track whose step stays on its road (one piece
+/// ahead, or two with the straight-on step within `on_road_m` of a road: a bend it follows
+/// anyway) is left alone. True when the track was re-routed.
+pub fn reroute_track<R: Rng + ?Sized>(
+    histories: &mut Histories,
+    i: usize,
+    world: &World,
+    dt_s: f64,
+    on_road_m: f64,
+    rng: &mut R,
+) -> bool {
+    if histories.k_in() < 2 || world.road.nodes.is_empty() {
+        return false;
+    }
+    let p = histories.newest(i);
+    let v = track_velocity(histories, i, dt_s);
+    let speed = v.norm();
+    let roads = world
+        .road
+        .reachable_from(&p, Some(v), (0.0, speed * dt_s))
+        .without_reversals(&v);
+    let pieces = roads.pieces().count();
+    let follows_its_road =
+        pieces < 2 || (pieces == 2 && world.road.distance_to_roads(&(p + v * dt_s)) <= on_road_m);
+    !follows_its_road && straight_track_on_roads(histories, i, &roads, speed..=speed, dt_s, rng)
+}
