@@ -588,8 +588,8 @@ impl EerPlanner {
         self.next.resize(self.indices.len(), Enu2::zeros());
         for _ in 0..self.params.horizon_steps {
             if let Some(on_road_m) = self.rollout_on_roads_m {
+                let dt = self.params.step_s;
                 for i in 0..self.indices.len() {
-                    let dt = self.params.step_s;
                     road_following::reroute_track(&mut self.rollout, i, world, dt, on_road_m, rng);
                 }
             }
@@ -605,16 +605,12 @@ impl EerPlanner {
         inp.predicted.clear();
         inp.predicted
             .extend((0..self.indices.len()).map(|i| self.rollout.newest(i)));
-        let k_in = self.rollout.k_in();
         let step_s = self.params.step_s;
         inp.velocity.clear();
-        inp.velocity.extend((0..self.indices.len()).map(|i| {
-            if k_in >= 2 && step_s > 0.0 {
-                (self.rollout.newest(i) - self.rollout.at(i, 0)) / (step_s * (k_in - 1) as f64)
-            } else {
-                Enu2::zeros()
-            }
-        }));
+        inp.velocity.extend(
+            (0..self.indices.len())
+                .map(|i| road_following::track_velocity(&self.rollout, i, step_s)),
+        );
 
         let n_m = self.params.measurements_per_particle;
         inp.n_m = n_m;

@@ -68,6 +68,8 @@ pub struct RoadNetwork {
     pub start: usize,
     /// Every directed edge as its end points, world ENU.
     segments: Vec<(Enu2, Enu2)>,
+    /// [`NEAR_EDGE_SHARE`] of the shortest edge, m (infinite without edges).
+    near_tolerance_m: f64,
 }
 
 impl RoadNetwork {
@@ -92,8 +94,16 @@ impl RoadNetwork {
             nodes,
             start: index(c.start_node),
             segments: Vec::new(),
+            near_tolerance_m: f64::INFINITY,
         };
         road.segments = road.edges_enu();
+        let shortest = road
+            .segments
+            .iter()
+            .map(|(a, b)| (b - a).norm())
+            .filter(|len| *len > 1e-9)
+            .fold(f64::INFINITY, f64::min);
+        road.near_tolerance_m = NEAR_EDGE_SHARE * shortest;
         road
     }
 
@@ -260,40 +270,50 @@ impl RoadNetwork {
     /// it count only when no other is near.
     fn nearest_edge(&self, p: &Enu2, heading: Option<Enu2>) -> Option<(usize, usize, f64)> {
         let heading = heading.filter(|h| h.norm() > 1e-9).map(|h| h.normalize());
-        let mut edges = Vec::new();
-        let mut shortest = f64::INFINITY;
-        for (u, node) in self.nodes.iter().enumerate() {
-            for &(v, _) in &node.next {
-                let a = node.position_enu;
-                let d = self.nodes[v].position_enu - a;
-                let len = d.norm();
-                if len <= 1e-9 {
-                    continue;
-                }
-                shortest = shortest.min(len);
-                let dir = d / len;
-                let s = (p - a).dot(&dir).clamp(0.0, len);
-                edges.push(((a + dir * s - p).norm(), dir, (u, v, s)));
-            }
-        }
-        let nearest = edges.iter().map(|e| e.0).fold(f64::INFINITY, f64::min);
+        let nearest = self
+            .edge_projections(p)
+            .map(|(dist, _, _)| dist)
+            .fold(f64::INFINITY, f64::min);
         // The heading chooses only among the edges about as near as the nearest: with it
         // weighed against any distance (before session 25, a 90-degree difference as 1 km),
         // a slow track 10 m short of a junction whose velocity's noise pointed east was put
         // on the start of an east-going road 390 m back, and a track just past a gentle bend
         // back on the road before it, 58 m behind (BENCHMARKS "Field scale, part 23").
-        let near = 2.0 * nearest + NEAR_EDGE_SHARE * shortest;
-        let cost = |(dist, dir, _): &(f64, Enu2, (usize, usize, f64))| match heading {
-            // Across or against the heading: as if up to 2 km farther away (a 5-degree
-            // difference costs 4 m, a crossing road 1 km).
-            Some(h) => dist + (1.0 - dir.dot(&h)) * 1e3,
-            None => *dist,
-        };
-        edges
-            .iter()
-            .filter(|e| e.0 <= near)
-            .min_by(|a, b| cost(a).total_cmp(&cost(b)))
-            .map(|e| e.2)
+        let near = 2.0 * nearest + self.near_tolerance_m;
+        let mut best: Option<(f64, (usize, usize, f64))> = None;
+        for (dist, dir, edge) in self.edge_projections(p).filter(|e| e.0 <= near) {
+            let cost = match heading {
+                // Across or against the heading: as if up to 2 km farther away (a 5-degree
+                // difference costs 4 m, a crossing road 1 km).
+                Some(h) => dist + (1.0 - dir.dot(&h)) * 1e3,
+                None => dist,
+            };
+            if best.map_or(true, |(c, _)| cost < c) {
+                best = Some((cost, edge));
+            }
+        }
+        best.map(|(_, e)| e)
+    }
+
+    /// Every edge of positive length with `p`'s distance to it, its unit direction and the
+    /// edge (from-node, to-node indices, distance along it of `p`'s projection).
+    fn edge_projections<'a>(
+        &'a self,
+        p: &'a Enu2,
+    ) -> impl Iterator<Item = (f64, Enu2, (usize, usize, f64))> + 'a {
+        self.nodes.iter().enumerate().flat_map(move |(u, node)| {
+            node.next.iter().filter_map(move |&(v, _)| {
+                let a = node.position_enu;
+                let d = self.nodes[v].position_enu - a;
+                let len = d.norm();
+                if len <= 1e-9 {
+                    return None;
+                }
+                let dir = d / len;
+                let s = (p - a).dot(&dir).clamp(0.0, len);
+                Some(((a + dir * s - p).norm(), dir, (u, v, s)))
+            })
+        })
     }
 
     /// Collects the part of edge u->v (from `s0` metres along it, `travelled` metres of path
@@ -613,13 +633,13 @@ mod tests {
         assert!(off.length_m() > 0.0);
     }
 
-    /// A loop 0 -> 1 -> 2 with a gentle bend at 1 (14 degrees in, 11 out) and a chord 1 -> 5
-    /// north, 5 -> 0 back south-west: the geometry of the track jumps BENCHMARKS "Field
-    /// scale, part 23" found.
     fn rng() -> rand_chacha::ChaCha8Rng {
         rand_chacha::ChaCha8Rng::seed_from_u64(25)
     }
 
+    /// A loop 0 -> 1 -> 2 with a gentle bend at 1 (14 degrees in, 11 out) and a chord 1 -> 5
+    /// north, 5 -> 0 back south-west: the geometry of the track jumps BENCHMARKS "Field
+    /// scale, part 23" found.
     fn bend_and_chord() -> RoadNetwork {
         network(
             &[
