@@ -25,7 +25,8 @@
 //! Field-scale extension, documented where it departs from the paper ([`intercepts`],
 //! `guidance.intercept_within_s`, off unless a config sets it): once the target has been
 //! seen, a predicted particle beyond one horizon's reach is a candidate where the agent
-//! meets it, and EER judges what that candidate sees when the agent gets there.
+//! meets it (never past where it leaves the roads), and EER judges what that candidate sees
+//! when the agent gets there.
 //!
 //! The fast evaluation rests on one observation: the measured-branch entropies do not
 //! depend on the candidate (the candidate only decides whether each is received), and the
@@ -208,7 +209,8 @@ pub fn intercept_lead_s(
 
 /// Far candidates as intercepts: each predicted particle (candidates `0..N_H`, see
 /// [`candidates`]) beyond the reachable region's farthest point is moved to where the agent
-/// meets it ([`intercept_lead_s`]), clamped to the geofence; returns each candidate's lead
+/// meets it ([`intercept_lead_s`]), or where it leaves the roads if sooner
+/// ([`lead_on_the_roads`]), clamped to the geofence; returns each candidate's lead
 /// (zero for the reachable ones), for [`evaluate_fast_led`]. A field-scale extension of
 /// the paper's candidate set: there a far predicted particle is where the target will be
 /// at the horizon's end, and by the time the agent gets there the target has driven on (a
@@ -240,10 +242,42 @@ pub fn intercepts(
             horizon_s,
             within_s,
         );
+        let lead = lead_on_the_roads(inputs, j, lead, world);
         leads[j] = lead;
         candidates[j] = world.workspace_enu.clamp(&led(inputs, j, lead));
     }
     leads
+}
+
+/// Steps in which [`lead_on_the_roads`] follows a particle carried straight on, s.
+const LEAD_STEP_S: f64 = 0.5;
+
+/// The longest lead up to `lead_s` over which particle `j`, carried straight on at its
+/// velocity, stays on the roads (within half the footprint's smaller side of one: still in
+/// view of a camera looking at the road); `lead_s` in a world without roads. Carried
+/// straight on, a track that is about to turn or that drives into a dead end leaves the
+/// road, and its intercept lay where no car can be: on field-hill the drone flew 120 m past
+/// the spur's dead end while the car turned round in it, and lost it (BENCHMARKS.md "Field
+/// scale, part 25"). Cut at the road's end, the intercept is where the hypothesis can be
+/// last seen on its road.
+fn lead_on_the_roads(inputs: &EerInputs, j: usize, lead_s: f64, world: &World) -> f64 {
+    if lead_s <= 0.0 || world.road.nodes.is_empty() {
+        return lead_s;
+    }
+    let tolerance_m = 0.5
+        * world
+            .footprint
+            .half_width_m
+            .min(world.footprint.half_height_m);
+    let mut on_road_s = 0.0;
+    while on_road_s < lead_s {
+        let next_s = (on_road_s + LEAD_STEP_S).min(lead_s);
+        if world.road.distance_to_roads(&led(inputs, j, next_s)) > tolerance_m {
+            break;
+        }
+        on_road_s = next_s;
+    }
+    on_road_s
 }
 
 /// Entropy of the current estimate (eq. 7 form over the N_H current particles).

@@ -460,3 +460,69 @@ fn a_rerouted_rollout_takes_the_junctions_branches() {
         "north share, re-routed: {share}"
     );
 }
+
+/// An intercept is never where no car can be: a far particle driving east toward outdoor's
+/// corner at node 2 (1200, 0), where the road turns north, carried straight on for the full
+/// lead would lie 50 m past the corner, off every road; its intercept is cut where it
+/// leaves the road. A far particle mid-road keeps its whole lead.
+#[test]
+fn an_intercept_is_cut_where_its_particle_leaves_the_roads() {
+    let c = Config::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/outdoor.toml"
+    )))
+    .unwrap();
+    let world = c.world();
+    let east = Enu2::new(10.0, 0.0);
+    let inp = EerInputs {
+        current: vec![Enu2::new(1130.0, 0.0), Enu2::new(700.0, 0.0)],
+        weights: vec![0.5, 0.5],
+        predicted: vec![Enu2::new(1150.0, 0.0), Enu2::new(720.0, 0.0)],
+        velocity: vec![east, east],
+        n_m: 1,
+        ..Default::default()
+    };
+    let agent = Enu2::new(0.0, -50.0);
+    let (speed, horizon_s, within_s) = (15.0, 2.0, 10.0);
+    // Without roads' cut both would be led the full 10 s (each outruns the agent's reach
+    // within the look-ahead): check the uncut lead first.
+    for p in &inp.predicted {
+        let uncut = intercept_lead_s(&agent, p, &east, speed, horizon_s, within_s);
+        assert_eq!(uncut, within_s);
+    }
+    let mut cands = inp.predicted.clone();
+    let leads = intercepts(
+        &inp,
+        &mut cands,
+        &agent,
+        speed,
+        horizon_s,
+        speed * horizon_s,
+        within_s,
+        &world,
+    );
+    let tolerance = 0.5
+        * world
+            .footprint
+            .half_width_m
+            .min(world.footprint.half_height_m);
+    // The corner-bound particle: cut to its last point near the road (5 s to the corner,
+    // then at most the tolerance past it).
+    assert!(
+        leads[0] >= 5.0 && leads[0] < 5.0 + tolerance / 10.0 + 1e-9,
+        "{}",
+        leads[0]
+    );
+    assert!(
+        world.road.distance_to_roads(&cands[0]) <= tolerance,
+        "{}",
+        cands[0]
+    );
+    // Mid-road: the whole look-ahead, 100 m further east on the same road.
+    assert_eq!(leads[1], within_s);
+    assert!(
+        (cands[1] - Enu2::new(820.0, 0.0)).norm() < 1e-9,
+        "{}",
+        cands[1]
+    );
+}
