@@ -230,6 +230,7 @@ pub fn intercepts(
     world: &World,
 ) -> Vec<f64> {
     let mut leads = vec![0.0; candidates.len()];
+    let on_road_m = world.footprint.quarter_view_m();
     for (j, p) in inputs.predicted.iter().enumerate() {
         if (p - agent_enu).norm() <= farthest_m {
             continue;
@@ -242,7 +243,7 @@ pub fn intercepts(
             horizon_s,
             within_s,
         );
-        let lead = lead_on_the_roads(inputs, j, lead, world);
+        let lead = lead_on_the_roads(inputs, j, lead, world, on_road_m);
         leads[j] = lead;
         candidates[j] = world.workspace_enu.clamp(&led(inputs, j, lead));
     }
@@ -253,26 +254,28 @@ pub fn intercepts(
 const LEAD_STEP_S: f64 = 0.5;
 
 /// The longest lead up to `lead_s` over which particle `j`, carried straight on at its
-/// velocity, stays on the roads (within half the footprint's smaller side of one: still in
-/// view of a camera looking at the road); `lead_s` in a world without roads. Carried
+/// velocity, stays on the roads (within `on_road_m` of one: the intercepts pass a quarter of
+/// the footprint's smaller side, still in view of a camera looking at the road); `lead_s` in
+/// a world without roads. Carried
 /// straight on, a track that is about to turn or that drives into a dead end leaves the
 /// road, and its intercept lay where no car can be: on field-hill the drone flew 120 m past
 /// the spur's dead end while the car turned round in it, and lost it (BENCHMARKS.md "Field
 /// scale, part 25"). Cut at the road's end, the intercept is where the hypothesis can be
 /// last seen on its road.
-fn lead_on_the_roads(inputs: &EerInputs, j: usize, lead_s: f64, world: &World) -> f64 {
+fn lead_on_the_roads(
+    inputs: &EerInputs,
+    j: usize,
+    lead_s: f64,
+    world: &World,
+    on_road_m: f64,
+) -> f64 {
     if lead_s <= 0.0 || world.road.nodes.is_empty() {
         return lead_s;
     }
-    let tolerance_m = 0.5
-        * world
-            .footprint
-            .half_width_m
-            .min(world.footprint.half_height_m);
     let mut on_road_s = 0.0;
     while on_road_s < lead_s {
         let next_s = (on_road_s + LEAD_STEP_S).min(lead_s);
-        if world.road.distance_to_roads(&led(inputs, j, next_s)) > tolerance_m {
+        if world.road.distance_to_roads(&led(inputs, j, next_s)) > on_road_m {
             break;
         }
         on_road_s = next_s;

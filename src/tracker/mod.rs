@@ -677,7 +677,7 @@ impl Tracker {
     /// zero while it is spread out, when a mean velocity means nothing.
     fn confident_velocity(&self) -> Enu2 {
         let fp = &self.world.footprint;
-        if self.estimator.largest_sd_m() <= 0.5 * fp.half_width_m.min(fp.half_height_m) {
+        if self.estimator.largest_sd_m() <= fp.quarter_view_m() {
             self.estimator.velocity()
         } else {
             Enu2::zeros()

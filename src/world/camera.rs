@@ -21,6 +21,13 @@ impl Footprint {
         }
     }
 
+    /// A quarter of the footprint's smaller side, m: how far from a point the camera can be
+    /// and still hold it comfortably in view (a belief this concentrated fits in one view; a
+    /// point this near a road is seen by a camera looking at the road).
+    pub fn quarter_view_m(&self) -> f64 {
+        0.5 * self.half_width_m.min(self.half_height_m)
+    }
+
     /// Whether ground point `p` is inside the footprint of an agent at `agent` (both world ENU).
     #[inline]
     pub fn contains(&self, agent: &Enu2, p: &Enu2) -> bool {

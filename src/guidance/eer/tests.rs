@@ -230,15 +230,6 @@ fn lab_filter(c: &Config, radius_m: Option<f64>) -> ParticleFilter {
     pf
 }
 
-/// A quarter of the footprint's smaller side, m: a belief within a disc of 0.9 times this
-/// (standard deviation per axis: half the radius) is concentrated.
-fn quarter_view_m(world: &World) -> f64 {
-    0.5 * world
-        .footprint
-        .half_width_m
-        .min(world.footprint.half_height_m)
-}
-
 #[test]
 fn a_belief_inside_one_view_is_concentrated_and_a_spread_one_is_not() {
     let mut c = Config::default_lab();
@@ -246,7 +237,7 @@ fn a_belief_inside_one_view_is_concentrated_and_a_spread_one_is_not() {
     let world = c.world();
     let fp = world.footprint;
     assert!(belief_is_concentrated(
-        &lab_filter(&c, Some(0.9 * quarter_view_m(&world))),
+        &lab_filter(&c, Some(0.9 * world.footprint.quarter_view_m())),
         &world
     ));
     assert!(!belief_is_concentrated(
@@ -272,7 +263,7 @@ fn a_concentrated_belief_is_planned_with_the_concentrated_hypothesis_count() {
             .current
             .len()
     };
-    let tight = lab_filter(&c, Some(0.9 * quarter_view_m(&world)));
+    let tight = lab_filter(&c, Some(0.9 * world.footprint.quarter_view_m()));
     let spread = lab_filter(&c, None);
     let mut planner = EerPlanner::new(c.eer_params());
     assert_eq!(hypotheses(&mut planner, &tight), 30);
@@ -365,11 +356,7 @@ fn fast_eer_with_leads_equals_reference() {
 /// they are then.
 #[test]
 fn far_candidates_are_where_the_agent_meets_the_particles() {
-    let c = Config::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/config/outdoor.toml"
-    )))
-    .unwrap();
+    let c = outdoor();
     let world = c.world();
     let mut rng = CoreRng::seed_from_u64(23);
     let mut inp = EerInputs {
@@ -423,11 +410,7 @@ fn far_candidates_are_where_the_agent_meets_the_particles() {
 /// (p 0.6) and north (p 0.4); without, they all drive straight on east.
 #[test]
 fn a_rerouted_rollout_takes_the_junctions_branches() {
-    let c = Config::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/config/outdoor.toml"
-    )))
-    .unwrap();
+    let c = outdoor();
     let world = c.world();
     let params = c.filter_params();
     let dt = params.dt_s;
@@ -467,11 +450,7 @@ fn a_rerouted_rollout_takes_the_junctions_branches() {
 /// leaves the road. A far particle mid-road keeps its whole lead.
 #[test]
 fn an_intercept_is_cut_where_its_particle_leaves_the_roads() {
-    let c = Config::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/config/outdoor.toml"
-    )))
-    .unwrap();
+    let c = outdoor();
     let world = c.world();
     let east = Enu2::new(10.0, 0.0);
     let inp = EerInputs {
@@ -501,11 +480,7 @@ fn an_intercept_is_cut_where_its_particle_leaves_the_roads() {
         within_s,
         &world,
     );
-    let tolerance = 0.5
-        * world
-            .footprint
-            .half_width_m
-            .min(world.footprint.half_height_m);
+    let tolerance = world.footprint.quarter_view_m();
     // The corner-bound particle: cut to its last point near the road (5 s to the corner,
     // then at most the tolerance past it).
     assert!(
@@ -525,4 +500,13 @@ fn an_intercept_is_cut_where_its_particle_leaves_the_roads() {
         "{}",
         cands[1]
     );
+}
+
+/// The outdoor field world's config as shipped.
+fn outdoor() -> Config {
+    Config::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/outdoor.toml"
+    )))
+    .unwrap()
 }
