@@ -3,6 +3,7 @@
 
 use super::{Config, SpeedLimitShape};
 use crate::estimation::{FilterParams, KalmanParams};
+use crate::guidance::eer::DEFAULT_SEARCH_COMMITMENT;
 use crate::guidance::{EerParams, GuidanceKind, ReachShape};
 use crate::motion::MotionParams;
 use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams};
@@ -106,6 +107,7 @@ impl Config {
             process_noise: twice(self.filter.process_noise_cov_m2),
             step_s: self.filter_dt_s(),
             intercept_within_s: g.intercept_within_s,
+            search_commitment: g.search_commitment.unwrap_or(DEFAULT_SEARCH_COMMITMENT),
         }
     }
 

@@ -253,6 +253,7 @@ fn sizes_and_rates_that_would_exhaust_the_companion_are_refused_naming_the_key()
         "field-eight",
         "field-hill",
         "field-twin",
+        "field-town",
         "px4",
         "ardupilot",
         "default",
@@ -314,6 +315,30 @@ fn the_agent_speed_limit_shape_is_optional_and_a_bad_one_is_named() {
         msg.contains("round") && msg.contains("per_axis") && msg.contains("norm"),
         "{msg}"
     );
+}
+
+/// `guidance.search_commitment` is optional (absent: 0.2), a share in [0, 1] is passed to
+/// EER as given, and one outside it (or NaN) is an error naming the key.
+#[test]
+fn the_search_commitment_is_optional_and_a_bad_one_is_named() {
+    let c = Config::default_lab();
+    assert_eq!(c.guidance.search_commitment, None);
+    assert_eq!(c.eer_params().search_commitment, 0.2);
+    for share in [0.0, 0.5, 1.0] {
+        let set = load_modified(|t| {
+            tbl(t, "guidance").insert("search_commitment".into(), share.into());
+        })
+        .unwrap();
+        assert_eq!(set.eer_params().search_commitment, share);
+    }
+    for bad in [-0.1, 1.5, f64::NAN] {
+        let msg = load_modified(|t| {
+            tbl(t, "guidance").insert("search_commitment".into(), bad.into());
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(msg.contains("guidance.search_commitment"), "{msg}");
+    }
 }
 
 /// `guidance.intercept_within_s` is optional (absent: the paper's candidates), a lead is

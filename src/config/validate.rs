@@ -245,6 +245,15 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     if let Some(t) = g.intercept_within_s {
         positive("guidance.intercept_within_s", t)?;
     }
+    if let Some(share) = g.search_commitment {
+        if !(0.0..=1.0).contains(&share) {
+            return Err(invalid(
+                "guidance.search_commitment",
+                share,
+                "must be a share of the EER range, from 0 to 1",
+            ));
+        }
+    }
     let l = &g.lawn;
     if l.legs_x_m.is_empty() {
         return Err(invalid(

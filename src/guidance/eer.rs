@@ -36,6 +36,14 @@
 
 use rand::Rng;
 
+mod commitment;
+pub use commitment::committed_choice;
+
+/// `search_commitment` when a config leaves `guidance.search_commitment` out: the share
+/// session 22 first measured (outdoors level with the argmax) and session 27 measured on
+/// every world (BENCHMARKS.md "Field scale, part 26"); not tuned per world.
+pub const DEFAULT_SEARCH_COMMITMENT: f64 = 0.2;
+
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
 use crate::estimation::{road_following, ParticleFilter};
 use crate::motion::{Histories, MotionError, MotionModel};
@@ -74,6 +82,10 @@ pub struct EerParams {
     /// it carried on at its own velocity, looked ahead by at most this long after the
     /// horizon; `None` keeps the paper's candidate, the predicted particle itself.
     pub intercept_within_s: Option<f64>,
+    /// While searching ([`EerPlanner::set_searching`]), the share of the EER range below the
+    /// best within which the candidate nearest the previous waypoint is kept
+    /// ([`committed_choice`]); 0: the paper's argmax always.
+    pub search_commitment: f64,
 }
 
 /// Everything the evaluation needs, after the rollout: pure data.
@@ -546,6 +558,8 @@ pub struct EerPlanner {
     scratch: EerScratch,
     intercepts_on: bool,
     rollout_on_roads_m: Option<f64>,
+    searching: bool,
+    last_waypoint_enu: Option<Enu2>,
 }
 
 impl EerPlanner {
@@ -565,6 +579,14 @@ impl EerPlanner {
         self.rollout_on_roads_m = on_road_m;
     }
 
+    /// Whether the agent is searching: the target not yet seen, or unseen long enough that
+    /// the belief was re-spread. The plan then keeps to its previous waypoint's mode unless
+    /// another is clearly better ([`committed_choice`], `search_commitment`); otherwise the
+    /// paper's argmax.
+    pub fn set_searching(&mut self, on: bool) {
+        self.searching = on;
+    }
+
     /// A planner with these parameters.
     pub fn new(params: EerParams) -> Self {
         Self {
@@ -576,6 +598,8 @@ impl EerPlanner {
             scratch: EerScratch::default(),
             intercepts_on: true,
             rollout_on_roads_m: None,
+            searching: false,
+            last_waypoint_enu: None,
         }
     }
 
@@ -700,32 +724,30 @@ impl EerPlanner {
             p.miss_probability,
             &mut self.scratch,
         );
-        let (mut best, mut best_v) = (0, f64::NEG_INFINITY);
-        for (i, v) in eer.iter().enumerate() {
-            if *v > best_v {
-                best = i;
-                best_v = *v;
-            }
-        }
+        let previous = self.last_waypoint_enu.filter(|_| self.searching);
+        let best = committed_choice(&eer, &cands, previous, p.search_commitment);
+        let best_v = eer.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
         let (lo, hi) = eer
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
                 (l.min(*v), h.max(*v))
             });
-        let waypoint = if !best_v.is_finite() || hi - lo < 1e-12 {
+        let waypoint = match best {
+            Some(i) if best_v.is_finite() && hi - lo >= 1e-12 => cands[i],
             // Nothing to choose between (no candidate sees any particle): head for the
             // predicted mean, where the target most likely is.
-            let mut m = Enu2::zeros();
-            for (p, w) in self.inputs.predicted.iter().zip(&self.inputs.weights) {
-                m += *w * p;
+            _ => {
+                let mut m = Enu2::zeros();
+                for (p, w) in self.inputs.predicted.iter().zip(&self.inputs.weights) {
+                    m += *w * p;
+                }
+                world.workspace_enu.clamp(&m)
             }
-            world.workspace_enu.clamp(&m)
-        } else {
-            cands[best]
         };
+        self.last_waypoint_enu = Some(waypoint);
         EerDecision {
             waypoint_enu: waypoint,
-            eer: best_v,
+            eer: best.map_or(best_v, |i| eer[i]),
             h_now: h0,
             candidates: cands.len(),
         }

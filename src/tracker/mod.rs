@@ -698,6 +698,11 @@ impl Tracker {
             });
         };
         self.planner.use_intercepts(self.last_measurement.is_some());
+        // Searching: from the cue before the first sighting, or from the re-spread belief
+        // once the target has been unseen that long; EER then keeps to one mode
+        // (BENCHMARKS.md "Field scale, part 26").
+        self.planner
+            .set_searching(self.last_measurement.is_none() || self.respread_done);
         // EER plans with the prediction the filter makes: where the filter re-routes its
         // constant-velocity belief at junctions, so does the rollout. Straight on, the
         // predicted tracks ran off the road past every corner and EER sent the drone

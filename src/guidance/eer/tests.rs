@@ -510,3 +510,75 @@ fn outdoor() -> Config {
     )))
     .unwrap()
 }
+
+/// While searching, a plan keeps to its previous waypoint's mode when another is about as
+/// good, and leaves it for one clearly better; once the target has been seen (not
+/// searching) it takes the argmax, the paper's.
+#[test]
+fn a_search_keeps_to_its_mode_unless_another_is_clearly_better() {
+    let c = outdoor();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(27);
+    // Enough particles that each mode holds a few dozen, every one of them in EER, and
+    // several simulated measurements each: EER's estimate with N_M = 1 moves by more than
+    // the difference between two modes of about equal weight.
+    let mut fp = c.filter_params();
+    fp.particles = 2000;
+    let mut pf = ParticleFilter::on_roads(fp, &world, None, &mut rng);
+    let mut params = c.eer_params();
+    params.entropy_particles = 2000;
+    params.entropy_particles_concentrated = 2000;
+    params.measurements_per_particle = 8;
+    // Two modes on two east-west roads, as far from the agent, clear of every occlusion,
+    // and the rest of the network (no view sees much of it).
+    let (east, north) = (Enu2::new(450.0, 0.0), Enu2::new(150.0, 800.0));
+    let agent = Enu2::new(300.0, 400.0);
+    let ps = pf.particles();
+    let in_east = |p: &Enu2| (p - east).norm() < 30.0;
+    let in_north = |p: &Enu2| (p - north).norm() < 30.0;
+    let n_east = ps.iter().filter(|p| in_east(p)).count() as f64;
+    let n_north = ps.iter().filter(|p| in_north(p)).count() as f64;
+    let n_rest = ps.len() as f64 - n_east - n_north;
+    assert!(n_east >= 10.0 && n_north >= 10.0, "{n_east} {n_north}");
+    // Each mode's share of the weight, whatever the number of particles drawn in it.
+    let weigh = |share_east: f64, share_north: f64| -> Vec<f64> {
+        let rest = (1.0 - share_east - share_north) / n_rest;
+        ps.iter()
+            .map(|p| {
+                if in_east(p) {
+                    share_east / n_east
+                } else if in_north(p) {
+                    share_north / n_north
+                } else {
+                    rest
+                }
+            })
+            .collect()
+    };
+    let mut model = ConstantVelocity::new(c.motion.cv_max_speed_mps, c.filter_dt_s());
+    let near = |d: &EerDecision, p: Enu2| (d.waypoint_enu - p).norm() < 60.0;
+    let mut plan = |planner: &mut EerPlanner, pf: &mut ParticleFilter, shares: (f64, f64)| {
+        assert!(pf.set_weights(&weigh(shares.0, shares.1)));
+        planner
+            .plan(pf, &mut model, &agent, &world, &mut rng)
+            .unwrap()
+    };
+
+    let mut searching = EerPlanner::new(params.clone());
+    searching.set_searching(true);
+    let d = plan(&mut searching, &mut pf, (0.5, 0.1));
+    assert!(near(&d, east), "{}", d.waypoint_enu);
+    // North now holds a little more: the search stays east.
+    let d = plan(&mut searching, &mut pf, (0.28, 0.32));
+    assert!(near(&d, east), "{}", d.waypoint_enu);
+    // North clearly better: the search goes there.
+    let d = plan(&mut searching, &mut pf, (0.1, 0.5));
+    assert!(near(&d, north), "{}", d.waypoint_enu);
+
+    let mut seen = EerPlanner::new(params);
+    seen.set_searching(false);
+    let d = plan(&mut seen, &mut pf, (0.5, 0.1));
+    assert!(near(&d, east), "{}", d.waypoint_enu);
+    let d = plan(&mut seen, &mut pf, (0.1, 0.5));
+    assert!(near(&d, north), "{}", d.waypoint_enu);
+}
