@@ -39,17 +39,17 @@ use rand::Rng;
 mod commitment;
 pub use commitment::committed_choice;
 
-/// `search_commitment` when a config leaves `guidance.search_commitment` out: the share
-/// session 22 first measured (outdoors level with the argmax) and session 27 measured on
-/// every world (BENCHMARKS.md "Field scale, part 26"); not tuned per world.
-pub const DEFAULT_SEARCH_COMMITMENT: f64 = 0.2;
-
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
 use crate::estimation::{road_following, ParticleFilter};
 use crate::motion::{Histories, MotionError, MotionModel};
 use crate::world::geometry::Enu2;
 use crate::world::measurement::Gaussian2;
 use crate::world::World;
+
+/// `search_commitment` when a config leaves `guidance.search_commitment` out: the share
+/// session 22 first measured (outdoors level with the argmax) and session 27 measured on
+/// every world (BENCHMARKS.md "Field scale, part 26"); not tuned per world.
+pub const DEFAULT_SEARCH_COMMITMENT: f64 = 0.2;
 
 /// EER parameters (the configuration assembles them).
 #[derive(Debug, Clone)]
@@ -726,17 +726,11 @@ impl EerPlanner {
         );
         let previous = self.last_waypoint_enu.filter(|_| self.searching);
         let best = committed_choice(&eer, &cands, previous, p.search_commitment);
-        let best_v = eer.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-        let (lo, hi) = eer
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
-                (l.min(*v), h.max(*v))
-            });
         let waypoint = match best {
-            Some(i) if best_v.is_finite() && hi - lo >= 1e-12 => cands[i],
+            Some(i) => cands[i],
             // Nothing to choose between (no candidate sees any particle): head for the
             // predicted mean, where the target most likely is.
-            _ => {
+            None => {
                 let mut m = Enu2::zeros();
                 for (p, w) in self.inputs.predicted.iter().zip(&self.inputs.weights) {
                     m += *w * p;
@@ -747,7 +741,10 @@ impl EerPlanner {
         self.last_waypoint_enu = Some(waypoint);
         EerDecision {
             waypoint_enu: waypoint,
-            eer: best.map_or(best_v, |i| eer[i]),
+            eer: best.map_or_else(
+                || eer.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+                |i| eer[i],
+            ),
             h_now: h0,
             candidates: cands.len(),
         }

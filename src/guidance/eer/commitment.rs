@@ -14,38 +14,37 @@ use crate::world::geometry::Enu2;
 
 /// The index of the candidate to fly to: the argmax of `eer` (the first of equal ones), or,
 /// with a `previous` waypoint and a `share` > 0, the candidate nearest `previous` among those
-/// whose EER is at least `best - share * (best - worst)`. `None` when there is no candidate
-/// or no finite EER.
+/// whose EER is at least `best - share * (best - worst)`. Non-finite values count as absent.
+/// `None` when there is nothing to choose between: no finite EER, or all of them equal (no
+/// candidate sees any particle).
 pub fn committed_choice(
     eer: &[f64],
     candidates_enu: &[Enu2],
     previous_enu: Option<Enu2>,
     share: f64,
 ) -> Option<usize> {
-    let (mut best, mut best_v) = (None, f64::NEG_INFINITY);
-    let mut worst_v = f64::INFINITY;
-    for (i, v) in eer.iter().enumerate().filter(|(_, v)| v.is_finite()) {
-        if *v > best_v {
-            best = Some(i);
-            best_v = *v;
+    let finite = || eer.iter().enumerate().filter(|(_, v)| v.is_finite());
+    // The first of equal maxima, as eq. 14's argmax has always been taken here.
+    let (best, best_v) = finite().fold((None, f64::NEG_INFINITY), |(b, bv), (i, v)| {
+        if *v > bv {
+            (Some(i), *v)
+        } else {
+            (b, bv)
         }
-        worst_v = worst_v.min(*v);
+    });
+    let worst_v = finite().map(|(_, v)| *v).fold(f64::INFINITY, f64::min);
+    if best.is_none() || best_v - worst_v < 1e-12 {
+        return None;
     }
-    let (Some(previous), Some(_)) = (previous_enu, best) else {
+    let Some(previous) = previous_enu.filter(|_| share > 0.0) else {
         return best;
     };
-    if share <= 0.0 {
-        return best;
-    }
     let floor = best_v - share * (best_v - worst_v);
-    eer.iter()
-        .zip(candidates_enu)
-        .enumerate()
-        .filter(|(_, (v, _))| v.is_finite() && **v >= floor)
-        .min_by(|(_, (_, a)), (_, (_, b))| {
-            (*a - previous).norm().total_cmp(&(*b - previous).norm())
-        })
+    let distance = |i: usize| (candidates_enu[i] - previous).norm();
+    finite()
+        .filter(|(_, v)| **v >= floor)
         .map(|(i, _)| i)
+        .min_by(|a, b| distance(*a).total_cmp(&distance(*b)))
         .or(best)
 }
 
@@ -89,11 +88,13 @@ mod tests {
     }
 
     #[test]
-    fn non_finite_values_are_never_chosen_and_nothing_finite_is_none() {
+    fn non_finite_values_are_never_chosen_and_nothing_to_choose_between_is_none() {
         let eer = [f64::NAN, 0.5, 0.4];
         let prev = Some(Enu2::new(300.0, 0.0));
         assert_eq!(committed_choice(&eer, &cands(), prev, 0.2), Some(1));
         assert_eq!(committed_choice(&[f64::NAN; 3], &cands(), prev, 0.2), None);
         assert_eq!(committed_choice(&[], &[], prev, 0.2), None);
+        // Every candidate alike: no view sees any particle.
+        assert_eq!(committed_choice(&[0.3; 3], &cands(), None, 0.2), None);
     }
 }
