@@ -508,12 +508,13 @@ pub struct GuidanceConfig {
     /// part 16").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub intercept_within_s: Option<f64>,
-    /// Commitment while searching (before the first sighting, and once the target has been
-    /// unseen long enough that the belief is re-spread), a share of the EER range in [0, 1]:
+    /// Commitment while searching (before the first sighting, and whenever the target has
+    /// been unseen for longer than the plan's horizon or, if longer, the time it takes at
+    /// its last seen speed to cross the camera's view), a share of the EER range in [0, 1]:
     /// of the candidates whose EER is within this share of the range below the best, the plan
     /// keeps to the one nearest its previous waypoint, so the drone flies to one mode of a
     /// spread belief instead of back and forth between them (a departure from the paper's
-    /// argmax; BENCHMARKS "Field scale, part 26"). Tracking, the argmax. Optional; absent,
+    /// argmax; BENCHMARKS "Field scale, parts 26-27"). Tracking, the argmax. Optional; absent,
     /// 0.2; 0 restores the paper's argmax always.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_commitment: Option<f64>,

@@ -54,9 +54,11 @@ pub fn straight_track_on_roads<R: Rng + ?Sized>(
 /// Re-routes track `i` if its next straight step (at its track velocity, over `dt_s`) leaves
 /// its road at a junction: it is put on one of the roads it can take within that step (the
 /// turns drawn by their probabilities, never a U-turn back the way it came unless there is
-/// no other way on), keeping its speed. A track whose step stays on its road (one piece
-/// ahead, or two with the straight-on step within `on_road_m` of a road: a bend it follows
-/// anyway) is left alone. True when the track was re-routed.
+/// no other way on), keeping its speed. A track whose step runs off the end of a road with
+/// no way on but back (a dead end, or a U-turn edge at it) turns back along it. A track
+/// whose step stays on its road (one piece ahead, or two with the straight-on step within
+/// `on_road_m` of a road: a bend it follows anyway) is left alone. True when the track was
+/// re-routed.
 pub fn reroute_track<R: Rng + ?Sized>(
     histories: &mut Histories,
     i: usize,
@@ -71,12 +73,24 @@ pub fn reroute_track<R: Rng + ?Sized>(
     let p = histories.newest(i);
     let v = track_velocity(histories, i, dt_s);
     let speed = v.norm();
-    let roads = world
-        .road
-        .reachable_from(&p, Some(v), (0.0, speed * dt_s))
-        .without_reversals(&v);
+    let reachable = world.road.reachable_from(&p, Some(v), (0.0, speed * dt_s));
+    let roads = reachable.clone().without_reversals(&v);
     let pieces = roads.pieces().count();
-    let follows_its_road =
-        pieces < 2 || (pieces == 2 && world.road.distance_to_roads(&(p + v * dt_s)) <= on_road_m);
+    let step_on_road = world.road.distance_to_roads(&(p + v * dt_s)) <= on_road_m;
+    if pieces == 1 && !step_on_road {
+        // A dead end: the track is on its road, the road ends within the step and the only
+        // way on is back. Carried straight on, the belief ran off the road's end while the
+        // car turned round in it, and EER sent the drone past the end (field-twin's
+        // warehouse; BENCHMARKS.md "Field scale, part 27"). A track already off the road, or
+        // at a junction whose other roads lie outside the step, is no dead end: told by the
+        // graph, not by the pieces in reach (session 28's first rule turned tracks back at
+        // field-ring's corners).
+        let on_road = world.road.distance_to_roads(&p) <= on_road_m;
+        if on_road && world.road.heads_into_a_dead_end(&p, Some(v)) {
+            let back = reachable.only_reversals(&v);
+            return straight_track_on_roads(histories, i, &back, speed..=speed, dt_s, rng);
+        }
+    }
+    let follows_its_road = pieces < 2 || (pieces == 2 && step_on_road);
     !follows_its_road && straight_track_on_roads(histories, i, &roads, speed..=speed, dt_s, rng)
 }

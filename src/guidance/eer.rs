@@ -580,9 +580,9 @@ impl EerPlanner {
     }
 
     /// Whether the agent is searching: the target not yet seen, or unseen long enough that
-    /// the belief was re-spread. The plan then keeps to its previous waypoint's mode unless
-    /// another is clearly better ([`committed_choice`], `search_commitment`); otherwise the
-    /// paper's argmax.
+    /// the belief may have split (the tracker decides). The plan then keeps to its previous
+    /// waypoint's mode unless another is clearly better ([`committed_choice`],
+    /// `search_commitment`); otherwise the paper's argmax.
     pub fn set_searching(&mut self, on: bool) {
         self.searching = on;
     }

@@ -643,7 +643,7 @@ impl Tracker {
             }
         }
         Ok(match self.params.guidance {
-            GuidanceKind::Eer => self.plan_eer(vehicle_enu)?,
+            GuidanceKind::Eer => self.plan_eer(t_s, vehicle_enu)?,
             GuidanceKind::Pfwm => Command::GoTo {
                 position_enu: self.estimator.mean(),
                 velocity_enu: self.confident_velocity(),
@@ -684,11 +684,29 @@ impl Tracker {
         }
     }
 
+    /// How long after the last measurement the belief stays local (the one that measurement
+    /// left): the plan's horizon, or, if longer, the time the target, at the speed it was last
+    /// seen at, takes to cross the camera's view along its shorter side. Until then the target
+    /// may still be in or by the view it was lost from and EER's argmax follows it; after it,
+    /// the belief may have split (an occluded junction) and EER keeps to one mode. With one
+    /// horizon alone, the lab's closed loop lost 2.5 points of frames with the tag (seeds
+    /// 1-16: a slow target hidden for seconds under a 1 m square, the argmax still the right
+    /// move); with the crossing time it is level (BENCHMARKS.md "Field scale, part 27").
+    fn local_for_s(&self, horizon_s: f64) -> f64 {
+        let fp = self.world.footprint;
+        let view_m = 2.0 * fp.half_width_m.min(fp.half_height_m);
+        horizon_s.max(view_m / self.last_seen_speed_mps.max(1e-9))
+    }
+
     /// EER's waypoint is where to be at the end of the horizon; with the target's velocity
     /// (when the belief is concentrated) the setpoint moves so as to get there then, riding
     /// along with the target instead of trailing it.
-    fn plan_eer(&mut self, vehicle_enu: &Enu2) -> Result<Command, TrackerError> {
+    fn plan_eer(&mut self, t_s: f64, vehicle_enu: &Enu2) -> Result<Command, TrackerError> {
         let over_target_velocity_enu = self.confident_velocity();
+        let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
+        // Searching: EER then keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27").
+        let searching = self.respread_done
+            || is_searching(self.last_measurement, t_s, self.local_for_s(horizon_s));
         let Estimator::Particle { pf, model } = &mut self.estimator else {
             // Refused at construction by check_combination.
             return Err(TrackerError::Incompatible {
@@ -698,11 +716,7 @@ impl Tracker {
             });
         };
         self.planner.use_intercepts(self.last_measurement.is_some());
-        // Searching: from the cue before the first sighting, or from the re-spread belief
-        // once the target has been unseen that long; EER then keeps to one mode
-        // (BENCHMARKS.md "Field scale, part 26").
-        self.planner
-            .set_searching(self.last_measurement.is_none() || self.respread_done);
+        self.planner.set_searching(searching);
         // EER plans with the prediction the filter makes: where the filter re-routes its
         // constant-velocity belief at junctions, so does the rollout. Straight on, the
         // predicted tracks ran off the road past every corner and EER sent the drone
@@ -722,7 +736,6 @@ impl Tracker {
         )?;
         self.entropy = d.h_now;
         self.last_eer = d.eer;
-        let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
         let velocity_enu = if over_target_velocity_enu == Enu2::zeros() {
             approach_velocity(
                 vehicle_enu,
@@ -751,6 +764,16 @@ impl Tracker {
 /// loop 12-17 points of FOV). The threshold was `reach` at first; at the grid's corners the
 /// transit cost the lab's closed loop 1.3 points over 16 seeds (BENCHMARKS "Field scale,
 /// part 7").
+/// Whether EER is searching at `t_s`: the target never seen, or unseen for longer than
+/// `local_s` ([`Tracker::local_for_s`]), so that the belief may have split where it went out
+/// of view (an occluded junction, a covered crossing). Tracking through a loss with the
+/// paper's argmax, the plan flipped between a covered crossing's two exits from one plan to
+/// the next and the drone saw neither (field-eight: 39 % of the time in view; BENCHMARKS.md
+/// "Field scale, part 27").
+fn is_searching(last_measurement: Option<(f64, Enu2)>, t_s: f64, local_s: f64) -> bool {
+    last_measurement.map_or(true, |(seen_s, _)| t_s - seen_s > local_s)
+}
+
 fn approach_velocity(
     vehicle_enu: &Enu2,
     waypoint_enu: &Enu2,

@@ -466,3 +466,34 @@ fn before_the_first_sighting_the_re_spread_from_the_cue_keeps_out_what_was_watch
         );
     }
 }
+
+#[test]
+fn eer_searches_until_the_first_sighting_and_whenever_unseen_longer_than_the_belief_stays_local() {
+    let local_s = 2.0;
+    let seen_at = |t: f64| Some((t, Enu2::new(10.0, 20.0)));
+    assert!(is_searching(None, 0.0, local_s), "never seen");
+    assert!(is_searching(None, 100.0, local_s), "never seen");
+    assert!(!is_searching(seen_at(50.0), 50.0, local_s), "seen now");
+    assert!(!is_searching(seen_at(50.0), 52.0, local_s), "still local");
+    assert!(
+        is_searching(seen_at(50.0), 52.1, local_s),
+        "out of view past it"
+    );
+}
+
+#[test]
+fn the_belief_stays_local_until_the_target_could_have_crossed_the_view() {
+    let c = Config::default_lab();
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    let fp = t.world.footprint;
+    let view_m = 2.0 * fp.half_width_m.min(fp.half_height_m);
+    // A slow target: the crossing time, longer than the horizon.
+    t.last_seen_speed_mps = 0.1 * view_m;
+    assert!((t.local_for_s(2.0) - 10.0).abs() < 1e-9);
+    // A fast one crosses within the horizon: the horizon.
+    t.last_seen_speed_mps = 10.0 * view_m;
+    assert!((t.local_for_s(2.0) - 2.0).abs() < 1e-12);
+    // Seen standing: local until the re-spread.
+    t.last_seen_speed_mps = 0.0;
+    assert!(t.local_for_s(2.0) > 1e6);
+}

@@ -223,6 +223,18 @@ impl RoadNetwork {
         out
     }
 
+    /// Whether the road a target at `from` (heading `heading`, placed as in
+    /// [`Self::reachable_from`]) is on ends at a dead end: every edge out of its end node
+    /// leads back to its start node (a spur the car can only turn round in). False without
+    /// roads, and at a node with no edge out (nothing to turn back along).
+    pub fn heads_into_a_dead_end(&self, from: &Enu2, heading: Option<Enu2>) -> bool {
+        let Some((u, v, _)) = self.nearest_edge(from, heading) else {
+            return false;
+        };
+        let next = &self.nodes[v].next;
+        !next.is_empty() && next.iter().all(|(w, _)| *w == u)
+    }
+
     /// One route a target at `from` (heading `heading`, placed as in
     /// [`Self::reachable_from`]) can drive, its turns drawn by their probabilities: where
     /// it is, and the unit direction of its road, after each path length in `distances_m`
@@ -425,6 +437,28 @@ impl RoadPieces {
         self.pieces.iter().zip(self.weights.iter().copied())
     }
 
+    /// Only the pieces that run back against `heading` ([`Self::without_reversals`]'s
+    /// complement; empty when there is none, or no heading).
+    pub fn only_reversals(self, heading: &Enu2) -> RoadPieces {
+        let h = heading.norm();
+        let mut out = RoadPieces {
+            pieces: Vec::new(),
+            weights: Vec::new(),
+            total: 0.0,
+        };
+        if h <= 1e-9 {
+            return out;
+        }
+        for (piece, w) in self.pieces.into_iter().zip(self.weights) {
+            if is_reversal(&piece, heading, h) {
+                out.pieces.push(piece);
+                out.weights.push(w);
+            }
+        }
+        out.sum_total();
+        out
+    }
+
     /// These pieces less those that run back against `heading` (more than ~154 degrees
     /// from it: a U-turn), unless nothing else is left.
     pub fn without_reversals(self, heading: &Enu2) -> RoadPieces {
@@ -435,10 +469,7 @@ impl RoadPieces {
         let keep: Vec<bool> = self
             .pieces
             .iter()
-            .map(|(a, b)| {
-                let d = b - a;
-                d.norm() <= 1e-9 || d.dot(heading) / (d.norm() * h) > -0.9
-            })
+            .map(|piece| !is_reversal(piece, heading, h))
             .collect();
         if !keep.iter().any(|k| *k) {
             return self;
@@ -495,6 +526,13 @@ fn clip_to_disc(a: Enu2, b: Enu2, c: Enu2, r: f64) -> Option<(Enu2, Enu2)> {
     let t0 = ((-qb - sq) / (2.0 * qa)).max(0.0);
     let t1 = ((-qb + sq) / (2.0 * qa)).min(1.0);
     (t0 < t1).then(|| (a + d * t0, a + d * t1))
+}
+
+/// Whether `piece` runs back against `heading` (of norm `h` > 0): more than ~154 degrees
+/// from it, a U-turn.
+fn is_reversal((a, b): &(Enu2, Enu2), heading: &Enu2, h: f64) -> bool {
+    let d = b - a;
+    d.norm() > 1e-9 && d.dot(heading) / (d.norm() * h) <= -0.9
 }
 
 #[cfg(test)]
@@ -599,6 +637,20 @@ mod tests {
         let ahead = road.reachable_from(&Enu2::new(600.0, 398.0), Some(north), (0.0, 5.0));
         let heads_south = |r: &RoadPieces| r.pieces().any(|((a, b), _)| b.y < a.y - 1e-9);
         assert!(heads_south(&ahead), "the graph allows the U-turn");
+        // Node 6 has a way on besides the U-turn: no dead end.
+        assert!(!road.heads_into_a_dead_end(&Enu2::new(600.0, 398.0), Some(north)));
+        // Its complement: the U-turn alone, 3 m at p 0.3; nothing without a heading.
+        let back_only = ahead.clone().only_reversals(&north);
+        assert!(back_only.pieces().all(|((a, b), _)| b.y < a.y - 1e-9));
+        assert!((back_only.length_m() - 0.3 * 3.0).abs() < 1e-6);
+        assert_eq!(
+            ahead
+                .clone()
+                .only_reversals(&Enu2::zeros())
+                .pieces()
+                .count(),
+            0
+        );
         let on = ahead.without_reversals(&north);
         assert!(!heads_south(&on));
         assert!(on.pieces().any(|((a, _), _)| a.y >= 400.0 - 1e-9));

@@ -560,3 +560,45 @@ fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
     }
     assert!(refuted > 100, "{refuted} routes in the first frame's view");
 }
+
+#[test]
+fn particles_at_a_dead_end_turn_back_along_its_road() {
+    // field-twin's spur runs north from node 4 (500, 70) to node 6 (500, 500), the warehouse,
+    // and the only way on from 6 is back south. Every particle 2 m before the end driving
+    // north at 15 m/s: one step (5 m) runs off the road's end; each turns back along the
+    // spur at its speed, keeping its weight. Straight on, the belief left the road.
+    let c = Config::from_toml_str(
+        include_str!("../../../config/field-twin.toml"),
+        std::path::Path::new("config/field-twin.toml"),
+    )
+    .unwrap();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(6);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let (n, k, dt) = (pf.weights().len(), c.filter.history_len, c.filter_dt_s());
+    let mut h = Histories::new(n, k);
+    for i in 0..n {
+        let tr = h.track_mut(i);
+        for t in 0..k {
+            tr[2 * t] = 500.0;
+            tr[2 * t + 1] = 498.0 - (k - 1 - t) as f64 * 15.0 * dt;
+        }
+    }
+    pf.histories = h;
+    let weights_before = pf.weights().to_vec();
+    pf.reroute_at_junctions(&world, &mut rng);
+    for i in 0..n {
+        let p = pf.particle(i);
+        assert!(
+            world.road.distance_to_roads(&p) < 1e-6,
+            "off the road: {p:?}"
+        );
+        assert!(p.y <= 500.0 + 1e-9, "past the end: {p:?}");
+        let v = pf.track_velocity(i);
+        assert!(
+            v.y < -14.9 && v.x.abs() < 1e-6,
+            "not turned back south: {v:?}"
+        );
+    }
+    assert_eq!(pf.weights(), &weights_before[..]);
+}

@@ -1,10 +1,12 @@
 //! Commitment while searching. EER is myopic and its estimate is noisy (one simulated
 //! measurement per particle: re-planned over the same belief, the EER of one mode moved
 //! between -0.4 and 1.4 nats); over a spread belief (the operator's cue, whose hypotheses
-//! run both ways along every road, or the belief re-spread after a loss) the argmax jumped
-//! between far apart modes from one plan to the next, and the drone flew back and forth
-//! between them and reached neither (field-town: a median of 166 s to the first sighting;
-//! BENCHMARKS.md "Field scale, part 26"). While searching, the plan keeps to the candidate
+//! run both ways along every road, the belief re-spread after a loss, or the belief split
+//! at a covered junction) the argmax jumped between far apart modes from one plan to the
+//! next, and the drone flew back and forth between them and reached neither (field-town: a
+//! median of 166 s to the first sighting; field-eight: between the covered crossing's two
+//! exits; BENCHMARKS.md "Field scale, parts 26-27"). While searching (the target not seen
+//! since the belief stopped being local, see the tracker), the plan keeps to the candidate
 //! nearest its previous waypoint among those whose EER is within a share of the EER range
 //! below the best, so the drone flies to one mode unless another is clearly better. A
 //! departure from the paper's eq. 14 (the argmax), documented; `guidance.search_commitment
