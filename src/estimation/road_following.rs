@@ -73,8 +73,10 @@ pub fn reroute_track<R: Rng + ?Sized>(
     let p = histories.newest(i);
     let v = track_velocity(histories, i, dt_s);
     let speed = v.norm();
-    let reachable = world.road.reachable_from(&p, Some(v), (0.0, speed * dt_s));
-    let roads = reachable.clone().without_reversals(&v);
+    let (roads, back) = world
+        .road
+        .reachable_from(&p, Some(v), (0.0, speed * dt_s))
+        .split_reversals(&v);
     let pieces = roads.pieces().count();
     let step_on_road = world.road.distance_to_roads(&(p + v * dt_s)) <= on_road_m;
     if pieces == 1 && !step_on_road {
@@ -87,7 +89,6 @@ pub fn reroute_track<R: Rng + ?Sized>(
         // field-ring's corners).
         let on_road = world.road.distance_to_roads(&p) <= on_road_m;
         if on_road && world.road.heads_into_a_dead_end(&p, Some(v)) {
-            let back = reachable.only_reversals(&v);
             return straight_track_on_roads(histories, i, &back, speed..=speed, dt_s, rng);
         }
     }

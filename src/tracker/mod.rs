@@ -754,16 +754,6 @@ impl Tracker {
     }
 }
 
-/// The planned motion toward a waypoint beyond every candidate of the reachable region (a
-/// square's corners lie at sqrt(2) x reach, a disc's rim at reach; beyond them a waypoint is
-/// a far predicted particle) while the belief is
-/// spread out: the agent's top speed along the way, so that the setpoint (`reach` short of
-/// the waypoint, moving to it) carries the transit's speed as feed-forward instead of
-/// trailing it by speed / position gain. Otherwise zero, a fixed point, which arrives
-/// sooner than a setpoint that spreads the move over the horizon (that cost the lab's closed
-/// loop 12-17 points of FOV). The threshold was `reach` at first; at the grid's corners the
-/// transit cost the lab's closed loop 1.3 points over 16 seeds (BENCHMARKS "Field scale,
-/// part 7").
 /// Whether EER is searching at `t_s`: the target never seen, or unseen for longer than
 /// `local_s` ([`Tracker::local_for_s`]), so that the belief may have split where it went out
 /// of view (an occluded junction, a covered crossing). Tracking through a loss with the
@@ -774,6 +764,16 @@ fn is_searching(last_measurement: Option<(f64, Enu2)>, t_s: f64, local_s: f64) -
     last_measurement.map_or(true, |(seen_s, _)| t_s - seen_s > local_s)
 }
 
+/// The planned motion toward a waypoint beyond every candidate of the reachable region (a
+/// square's corners lie at sqrt(2) x reach, a disc's rim at reach; beyond them a waypoint is
+/// a far predicted particle) while the belief is
+/// spread out: the agent's top speed along the way, so that the setpoint (`reach` short of
+/// the waypoint, moving to it) carries the transit's speed as feed-forward instead of
+/// trailing it by speed / position gain. Otherwise zero, a fixed point, which arrives
+/// sooner than a setpoint that spreads the move over the horizon (that cost the lab's closed
+/// loop 12-17 points of FOV). The threshold was `reach` at first; at the grid's corners the
+/// transit cost the lab's closed loop 1.3 points over 16 seeds (BENCHMARKS "Field scale,
+/// part 7").
 fn approach_velocity(
     vehicle_enu: &Enu2,
     waypoint_enu: &Enu2,

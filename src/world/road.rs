@@ -437,56 +437,42 @@ impl RoadPieces {
         self.pieces.iter().zip(self.weights.iter().copied())
     }
 
-    /// Only the pieces that run back against `heading` ([`Self::without_reversals`]'s
-    /// complement; empty when there is none, or no heading).
-    pub fn only_reversals(self, heading: &Enu2) -> RoadPieces {
+    /// These pieces split in one pass: those that do not run back against `heading` (more
+    /// than ~154 degrees from it: a U-turn), or all of them when nothing else is left; and
+    /// the reversals alone (none without a heading).
+    pub fn split_reversals(self, heading: &Enu2) -> (RoadPieces, RoadPieces) {
         let h = heading.norm();
-        let mut out = RoadPieces {
+        let empty = || RoadPieces {
             pieces: Vec::new(),
             weights: Vec::new(),
             total: 0.0,
         };
         if h <= 1e-9 {
-            return out;
+            return (self, empty());
         }
+        let (mut ahead, mut back) = (empty(), empty());
         for (piece, w) in self.pieces.into_iter().zip(self.weights) {
-            if is_reversal(&piece, heading, h) {
-                out.pieces.push(piece);
-                out.weights.push(w);
-            }
+            let side = if is_reversal(&piece, heading, h) {
+                &mut back
+            } else {
+                &mut ahead
+            };
+            side.pieces.push(piece);
+            side.weights.push(w);
         }
-        out.sum_total();
-        out
+        if ahead.pieces.is_empty() {
+            ahead.pieces.clone_from(&back.pieces);
+            ahead.weights.clone_from(&back.weights);
+        }
+        ahead.sum_total();
+        back.sum_total();
+        (ahead, back)
     }
 
     /// These pieces less those that run back against `heading` (more than ~154 degrees
     /// from it: a U-turn), unless nothing else is left.
     pub fn without_reversals(self, heading: &Enu2) -> RoadPieces {
-        let h = heading.norm();
-        if h <= 1e-9 {
-            return self;
-        }
-        let keep: Vec<bool> = self
-            .pieces
-            .iter()
-            .map(|piece| !is_reversal(piece, heading, h))
-            .collect();
-        if !keep.iter().any(|k| *k) {
-            return self;
-        }
-        let mut out = RoadPieces {
-            pieces: Vec::new(),
-            weights: Vec::new(),
-            total: 0.0,
-        };
-        for ((piece, w), k) in self.pieces.into_iter().zip(self.weights).zip(keep) {
-            if k {
-                out.pieces.push(piece);
-                out.weights.push(w);
-            }
-        }
-        out.sum_total();
-        out
+        self.split_reversals(heading).0
     }
 
     /// A point drawn by weighted length and the unit direction of its road; `None` when
@@ -640,13 +626,14 @@ mod tests {
         // Node 6 has a way on besides the U-turn: no dead end.
         assert!(!road.heads_into_a_dead_end(&Enu2::new(600.0, 398.0), Some(north)));
         // Its complement: the U-turn alone, 3 m at p 0.3; nothing without a heading.
-        let back_only = ahead.clone().only_reversals(&north);
+        let back_only = ahead.clone().split_reversals(&north).1;
         assert!(back_only.pieces().all(|((a, b), _)| b.y < a.y - 1e-9));
         assert!((back_only.length_m() - 0.3 * 3.0).abs() < 1e-6);
         assert_eq!(
             ahead
                 .clone()
-                .only_reversals(&Enu2::zeros())
+                .split_reversals(&Enu2::zeros())
+                .1
                 .pieces()
                 .count(),
             0
