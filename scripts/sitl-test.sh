@@ -3,7 +3,8 @@
 # ../shared/sitl (tests/sitl.rs). Prepares a runnable copy of the builds in a temporary
 # folder (PX4's command links are stored as text files there), then runs the suite. Says
 # plainly, and succeeds, when the builds are not there. INFOTRACK_SITL_TESTS=NAME runs only the
-# tests whose names contain NAME.
+# tests whose names contain NAME; INFOTRACK_SITL_KEEP=DIR keeps each flight's outputs
+# (steps.csv, flight.csv, link.tlog, infotrack's log) in DIR for a look afterwards.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 src="${INFOTRACK_SITL_SOURCE:-../shared/sitl}"

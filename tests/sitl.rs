@@ -169,6 +169,21 @@ fn fly_world(vehicle: &str, seconds: u32, name: &str) -> Flight {
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("summary.json")).unwrap())
             .unwrap();
     let tlog = tlog::read(&out_dir.join("link.tlog")).unwrap();
+    // INFOTRACK_SITL_KEEP=DIR keeps each flight's outputs (steps.csv, flight.csv, the
+    // tlog) for a look afterwards: DIR/NAME-N.
+    if let Ok(keep) = std::env::var("INFOTRACK_SITL_KEEP") {
+        let kept = (0..)
+            .map(|n| Path::new(&keep).join(format!("{name}-{n}")))
+            .find(|p| !p.exists())
+            .unwrap();
+        std::fs::create_dir_all(&kept).unwrap();
+        for e in std::fs::read_dir(&out_dir).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), kept.join(e.file_name())).unwrap();
+        }
+        std::fs::write(kept.join("stderr.txt"), &stderr).unwrap();
+        println!("SITL flight kept in {}", kept.display());
+    }
     Flight {
         stdout,
         stderr,
@@ -360,7 +375,11 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     // the frames of the lab's target path, 3.9 % from the lab's centre; `sim --closed-loop
     // --seed 1 --duration 60`'s steps.csv). Estimate: within 0.7 m of the target (0.11-0.45 m
     // on PX4 SIH over seven flights); an estimate that stayed at the lab's centre would be
-    // 1.04 m off on average, the target circling the lab.
+    // 1.04 m off on average, the target circling the lab. Until session 30 a miss of a tag
+    // cut by the image's edge (PX4 hunts, so the target sits near the edge often) erased
+    // the true hypothesis: 0.6 % / 0.91 m in one CI flight, 10 % / 0.83 m in one of four
+    // here. Since the filter and EER count only whole tags: 27.8-37.8 %, 0.11-0.15 m over
+    // five flights with the cut (BENCHMARKS.md "Whole tags").
     assert!(fov(&f) >= 8.0, "{}", f.stdout);
     let estimation_m = f.summary["estimation_error_m"].as_f64().unwrap();
     assert!(estimation_m <= 0.7, "{}", f.stdout);

@@ -30,6 +30,15 @@ impl Config {
         )
     }
 
+    /// The world as a tracker measuring through the AprilTag detector sees it (rendered
+    /// frames, a real camera): a missing detection is evidence only where the whole tag
+    /// would be in the image (see [`World::is_wholly_visible`]). The analytic sensor sees
+    /// a target whenever its centre is in view, and its tracker keeps [`Self::world`].
+    pub fn world_seen_by_detector(&self) -> World {
+        self.world()
+            .with_detection_margin(self.vision.detection_margin_m())
+    }
+
     /// The occlusions as polygons, world ENU.
     pub fn occlusion_polygons(&self) -> Vec<PolygonEnu> {
         self.occlusions

@@ -282,6 +282,14 @@ pub struct VisionSimConfig {
     pub projection: crate::vision::projection::ProjectionNoise,
 }
 
+impl VisionSimConfig {
+    /// How near the edge of the image (or an occlusion) the tag's centre may be and the
+    /// tag still be cut off, m: half its diagonal (the tag turns with the target).
+    pub fn detection_margin_m(&self) -> f64 {
+        self.tag_size_m * std::f64::consts::FRAC_1_SQRT_2
+    }
+}
+
 impl Default for VisionSimConfig {
     fn default() -> Self {
         Self {

@@ -409,7 +409,8 @@ impl Pipeline {
         let rng_meas = stream_rng(seed, 0, Stream::Measurement, 0);
         let tracker = Tracker::new(
             cfg.tracker_params(GuidanceKind::Eer, true),
-            world.clone(),
+            // Synthetic or real, the daemon's camera measures through the detector.
+            cfg.world_seen_by_detector(),
             &EstimatorKind::parse(motion_name)?,
             stream_rng(seed, 0, Stream::Filter, 0),
             stream_rng(seed, 0, Stream::Guidance, 0),

@@ -56,7 +56,7 @@ pub fn replay(
     // The streams the pipeline used, in the order it drew from them.
     let mut tracker = Tracker::new(
         cfg.tracker_params(GuidanceKind::Eer, false),
-        cfg.world(),
+        cfg.world_seen_by_detector(),
         &EstimatorKind::parse(motion_name)?,
         stream_rng(seed, 0, Stream::Filter, 0),
         stream_rng(seed, 0, Stream::Guidance, 0),

@@ -281,7 +281,7 @@ impl ParticleFilter {
             let seen = looked
                 .iter()
                 .zip(&at)
-                .filter(|((_, camera), p)| world.is_visible(camera, p))
+                .filter(|((_, camera), p)| world.is_wholly_visible(camera, p))
                 .count();
             *lw = if seen == 0 {
                 0.0
@@ -685,8 +685,11 @@ impl ParticleFilter {
             }
             None => {
                 // Negative information: "not seen there" lowers the mass inside the view.
+                // The paper applies it over the whole footprint; here only where the whole
+                // tag would be in the image and clear of occlusions (the detector misses
+                // a tag cut by the edge, and a miss there must not erase the truth).
                 for i in 0..self.weights.len() {
-                    if world.is_visible(agent_enu, &self.histories.newest(i)) {
+                    if world.is_wholly_visible(agent_enu, &self.histories.newest(i)) {
                         self.weights[i] *= self.params.miss_probability;
                     }
                 }

@@ -9,7 +9,8 @@
 //! 3. For a candidate waypoint c, a simulated measurement is received only if its particle
 //!    lies inside the footprint of an agent at c and outside every occlusion (the paper's
 //!    intent; the authors' code tested z_j against a footprint built around z_j, which
-//!    always passes). A received z_jm gives the eq. 10 entropy; otherwise the posterior is
+//!    always passes; through the detector, the whole tag: `World::is_wholly_visible`,
+//!    the filter's model of the camera). A received z_jm gives the eq. 10 entropy; otherwise the posterior is
 //!    the missed-detection one, whose likelihood is p_miss for particles in view from c
 //!    and 1 elsewhere (negative information; with p_miss = 1 this is exactly eq. 11).
 //! 4. EER(c) = H_now - sum_jm alpha_jm H_jm(c), with alpha_jm proportional to
@@ -422,12 +423,13 @@ pub fn evaluate_fast_led(
     scratch.occluded.clear();
     scratch
         .occluded
-        .extend(inputs.predicted.iter().map(|p| world.is_occluded(p)));
+        .extend(inputs.predicted.iter().map(|p| world.may_hide_the_tag(p)));
 
     // Sums over all particles, to get the not-in-view sums by subtraction.
     let w_log_s_all: f64 = w.iter().zip(log_s).map(|(w, s)| w * s).sum();
     let log_miss = miss_probability.ln();
-    let fp = world.footprint;
+    // In view as the filter models the camera: the whole tag (World::is_wholly_visible).
+    let (fp, inset) = (world.footprint, world.detection_margin_m);
     let eer = candidates
         .iter()
         .enumerate()
@@ -436,10 +438,9 @@ pub fn evaluate_fast_led(
             let (mut w_vis, mut wls_vis, mut p_vis, mut a_h_vis) = (0.0, 0.0, 0.0, 0.0);
             for i in 0..n {
                 let in_view = if lead_s > 0.0 {
-                    let p = led(inputs, i, lead_s);
-                    fp.contains(c, &p) && !world.is_occluded(&p)
+                    world.is_wholly_visible(c, &led(inputs, i, lead_s))
                 } else {
-                    !scratch.occluded[i] && fp.contains(c, &inputs.predicted[i])
+                    !scratch.occluded[i] && fp.contains_inset(c, &inputs.predicted[i], inset)
                 };
                 if in_view {
                     w_vis += w[i];
@@ -499,7 +500,9 @@ pub fn evaluate_reference_led(
         .enumerate()
         .map(|(k, c)| {
             let lead_s = leads.get(k).copied().unwrap_or(0.0);
-            let visible = |c: &Enu2, i: usize| world.is_visible(c, &led(inputs, i, lead_s));
+            // The filter's model of the camera: through the detector, a tag is found (and
+            // a miss is evidence) only when the whole tag is in view.
+            let visible = |c: &Enu2, i: usize| world.is_wholly_visible(c, &led(inputs, i, lead_s));
             let mut expected = 0.0;
             for j in 0..n {
                 for m in 0..inputs.n_m {

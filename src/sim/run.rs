@@ -118,9 +118,18 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
     let mut rng_target = stream_rng(spec.seed, spec.run_index, Stream::Target, 0);
     let rng_meas = stream_rng(spec.seed, spec.run_index, Stream::Measurement, 0);
     let target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
+    // The tracker's model of its camera is the sensor's: whole tags only through the
+    // detector.
+    let seen = if spec.vision {
+        world
+            .clone()
+            .with_detection_margin(cfg.vision.detection_margin_m())
+    } else {
+        world.clone()
+    };
     let tracker = Tracker::new(
         cfg.tracker_params(spec.guidance, false),
-        world.clone(),
+        seen,
         &spec.estimator,
         stream_rng(spec.seed, spec.run_index, Stream::Filter, method),
         stream_rng(spec.seed, spec.run_index, Stream::Guidance, method),

@@ -34,6 +34,14 @@ impl Footprint {
         (p.x - agent.x).abs() <= self.half_width_m && (p.y - agent.y).abs() <= self.half_height_m
     }
 
+    /// Whether ground point `p` is at least `inset_m` inside the footprint of an agent at
+    /// `agent` (both world ENU).
+    #[inline]
+    pub fn contains_inset(&self, agent: &Enu2, p: &Enu2, inset_m: f64) -> bool {
+        (p.x - agent.x).abs() <= self.half_width_m - inset_m
+            && (p.y - agent.y).abs() <= self.half_height_m - inset_m
+    }
+
     /// The four corners, counter-clockwise from south-west, world ENU.
     pub fn corners(&self, agent: &Enu2) -> [Enu2; 4] {
         let (w, h) = (self.half_width_m, self.half_height_m);

@@ -155,6 +155,29 @@ impl PolygonEnu {
         })
     }
 
+    /// Whether `p` is inside or within `margin_m` of the boundary: the polygon grown by
+    /// `margin_m` (an occlusion that may cover part of a tag centred at `p`).
+    pub fn contains_or_near(&self, p: &Enu2, margin_m: f64) -> bool {
+        let b = &self.bbox;
+        if p.x < b.x_min_m - margin_m
+            || p.x > b.x_max_m + margin_m
+            || p.y < b.y_min_m - margin_m
+            || p.y > b.y_max_m + margin_m
+        {
+            return false;
+        }
+        if self.contains(p) {
+            return true;
+        }
+        let n = self.vertices.len();
+        (0..n).any(|i| {
+            let (a, c) = (self.vertices[i], self.vertices[(i + 1) % n]);
+            let ab = c - a;
+            let t = ((p - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+            (p - (a + ab * t)).norm() <= margin_m
+        })
+    }
+
     /// Signed-area magnitude in square metres (shoelace formula).
     pub fn area_m2(&self) -> f64 {
         let n = self.vertices.len();
@@ -189,6 +212,18 @@ fn segments_meet(a: &Enu2, b: &Enu2, c: &Enu2, d: &Enu2) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn contains_or_near_grows_the_polygon_by_the_margin() {
+        let sq = PolygonEnu::square(Enu2::new(1.0, 2.0), 2.0);
+        assert!(sq.contains_or_near(&Enu2::new(1.0, 2.0), 0.1));
+        assert!(sq.contains_or_near(&Enu2::new(2.05, 2.0), 0.1));
+        assert!(!sq.contains_or_near(&Enu2::new(2.15, 2.0), 0.1));
+        // Off a corner the grown polygon is round: 0.08 m along both axes is 0.113 m away.
+        assert!(!sq.contains_or_near(&Enu2::new(2.08, 3.08), 0.1));
+        assert!(sq.contains_or_near(&Enu2::new(2.06, 3.06), 0.1));
+        assert!(!sq.contains_or_near(&Enu2::new(2.05, 2.0), 0.0));
+    }
 
     fn lab() -> BoundsEnu {
         BoundsEnu {

@@ -25,6 +25,10 @@ pub struct World {
     pub footprint: Footprint,
     /// z = x + N(0, R).
     pub measurement: MeasurementModel,
+    /// How near the edge of the view or an occlusion a tag's centre may be and the tag
+    /// still be cut off (half its diagonal, metres): a detector finds only whole tags, so
+    /// a missing detection says nothing about a target in that band. 0 by default.
+    pub detection_margin_m: f64,
 }
 
 impl World {
@@ -43,7 +47,15 @@ impl World {
             occlusions,
             footprint,
             measurement,
+            detection_margin_m: 0.0,
         }
+    }
+
+    /// The same world, its detector finding only tags whose centre lies `margin_m` or more
+    /// inside the view and clear of every occlusion (see [`Self::is_wholly_visible`]).
+    pub fn with_detection_margin(mut self, margin_m: f64) -> Self {
+        self.detection_margin_m = margin_m.max(0.0);
+        self
     }
 
     /// Whether a ground point is hidden by any occlusion.
@@ -55,5 +67,53 @@ impl World {
     /// and outside every occlusion (the paper's x in S and not in O).
     pub fn is_visible(&self, agent: &Enu2, target: &Enu2) -> bool {
         self.footprint.contains(agent, target) && !self.is_occluded(target)
+    }
+
+    /// Whether a target at `target` shows its whole tag to an agent at `agent`: its centre
+    /// at least the detection margin inside the footprint and away from every occlusion.
+    /// Only there does a frame without a detection say the target is not there (negative
+    /// information); a tag cut by the image's edge or half under a roof is missed by the
+    /// detector (the lab's PX4 SIH flights: most misses of a target in view had its centre
+    /// within 0.05 m of the edge, half the 0.1 m tag).
+    pub fn is_wholly_visible(&self, agent: &Enu2, target: &Enu2) -> bool {
+        self.footprint
+            .contains_inset(agent, target, self.detection_margin_m)
+            && !self.may_hide_the_tag(target)
+    }
+
+    /// Whether an occlusion may cover part of a tag centred at `p`: `p` inside one, or
+    /// within the detection margin of one.
+    pub fn may_hide_the_tag(&self, p: &Enu2) -> bool {
+        let m = self.detection_margin_m;
+        self.occlusions.iter().any(|o| o.contains_or_near(p, m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+
+    #[test]
+    fn a_whole_tag_is_seen_only_clear_of_the_edge_and_of_every_occlusion() {
+        let plain = Config::default_lab().world();
+        let w = plain.clone().with_detection_margin(0.07);
+        let agent = Enu2::new(-2.0, 1.5);
+        let half = w.footprint.half_width_m;
+        // Near the east edge: in view, but the tag may be cut off.
+        let edge = Enu2::new(agent.x + half - 0.03, agent.y);
+        assert!(w.is_visible(&agent, &edge) && !w.is_wholly_visible(&agent, &edge));
+        let inside = Enu2::new(agent.x + half - 0.1, agent.y);
+        assert!(w.is_wholly_visible(&agent, &inside));
+        // The same at the north edge, and with no margin the band is in view.
+        let north = Enu2::new(agent.x, agent.y + w.footprint.half_height_m - 0.05);
+        assert!(!w.is_wholly_visible(&agent, &north));
+        assert!(plain.is_wholly_visible(&agent, &north) && plain.is_visible(&agent, &north));
+        // Occlusion "between B and C" spans x -0.15..0.85: 0.05 m west of it a tag is
+        // half under it; 0.1 m west it is clear.
+        let over = Enu2::new(0.0, 0.2);
+        assert!(!w.is_wholly_visible(&over, &Enu2::new(-0.2, 0.2)));
+        assert!(w.is_visible(&over, &Enu2::new(-0.2, 0.2)));
+        assert!(w.is_wholly_visible(&over, &Enu2::new(-0.25, 0.2)));
     }
 }
