@@ -39,19 +39,23 @@ fn fast_eer_equals_reference_on_random_inputs() {
     // A wide kernel and a moderate miss probability keep every term well away from
     // underflow in the reference's linear-domain arithmetic.
     c.guidance.entropy_kernel_cov_m2 = [[0.05, 0.01], [0.01, 0.04]];
-    let world = c.world();
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(9);
-    for (trial, &(n, n_m, p_miss)) in [(12, 1, 1e-3), (9, 3, 0.2), (15, 2, 1.0), (6, 1, 1e-10)]
+    // The analytic sensor's world, and the detector's (whole tags: a margin inside the view
+    // and around the occlusions).
+    let worlds = [c.world(), c.world_seen_by_detector()];
+    let trials = [(12, 1, 1e-3), (9, 3, 0.2), (15, 2, 1.0), (6, 1, 1e-10)];
+    for (trial, (world, &(n, n_m, p_miss))) in worlds
         .iter()
+        .flat_map(|w| trials.iter().map(move |t| (w, t)))
         .enumerate()
     {
-        let inp = random_inputs(&mut rng, n, n_m, &world);
+        let inp = random_inputs(&mut rng, n, n_m, world);
         let agent = Enu2::new(-0.5, 0.4);
-        let cands = candidates(&inp, &agent, 1.2, ReachShape::Square, 5, &world);
+        let cands = candidates(&inp, &agent, 1.2, ReachShape::Square, 5, world);
         let mut scratch = EerScratch::default();
-        let (h_fast, fast) = evaluate_fast(&inp, &cands, &world, &kernel, p_miss, &mut scratch);
-        let (h_ref, reference) = evaluate_reference(&inp, &cands, &world, &kernel, p_miss);
+        let (h_fast, fast) = evaluate_fast(&inp, &cands, world, &kernel, p_miss, &mut scratch);
+        let (h_ref, reference) = evaluate_reference(&inp, &cands, world, &kernel, p_miss);
         assert!(
             (h_fast - h_ref).abs() < 1e-9,
             "trial {trial}: {h_fast} vs {h_ref}"
@@ -68,6 +72,30 @@ fn fast_eer_equals_reference_on_random_inputs() {
         }
         assert!(differing > 0, "trial {trial}: candidates must not all tie");
     }
+}
+
+#[test]
+fn the_detector_margin_changes_what_a_candidate_sees() {
+    // Particles in the band along the view's edge count as seen for the analytic sensor
+    // and not through the detector: some candidate's EER differs.
+    let mut c = Config::default_lab();
+    c.guidance.entropy_kernel_cov_m2 = [[0.05, 0.01], [0.01, 0.04]];
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let (plain, seen) = (c.world(), c.world_seen_by_detector());
+    let mut rng = CoreRng::seed_from_u64(9);
+    let inp = random_inputs(&mut rng, 40, 1, &plain);
+    let cands = candidates(
+        &inp,
+        &Enu2::new(-0.5, 0.4),
+        1.2,
+        ReachShape::Square,
+        5,
+        &plain,
+    );
+    let mut scratch = EerScratch::default();
+    let (_, a) = evaluate_fast(&inp, &cands, &plain, &kernel, 1e-3, &mut scratch);
+    let (_, b) = evaluate_fast(&inp, &cands, &seen, &kernel, 1e-3, &mut scratch);
+    assert!(a.iter().zip(&b).any(|(x, y)| (x - y).abs() > 1e-6));
 }
 
 #[test]
@@ -329,24 +357,29 @@ fn the_intercept_lead_is_when_the_agent_meets_the_particle() {
 fn fast_eer_with_leads_equals_reference() {
     let mut c = Config::default_lab();
     c.guidance.entropy_kernel_cov_m2 = [[0.05, 0.01], [0.01, 0.04]];
-    let world = c.world();
+    for world in [c.world(), c.world_seen_by_detector()] {
+        fast_eer_with_leads_equals_reference_in(&world, &c);
+    }
+}
+
+fn fast_eer_with_leads_equals_reference_in(world: &World, c: &Config) {
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(19);
-    let mut inp = random_inputs(&mut rng, 14, 2, &world);
+    let mut inp = random_inputs(&mut rng, 14, 2, world);
     inp.velocity = (0..14)
         .map(|_| Enu2::new(rng.gen_range(-0.4..0.4), rng.gen_range(-0.4..0.4)))
         .collect();
     let agent = Enu2::new(-0.5, 0.4);
-    let cands = candidates(&inp, &agent, 0.6, ReachShape::Square, 4, &world);
+    let cands = candidates(&inp, &agent, 0.6, ReachShape::Square, 4, world);
     let leads: Vec<f64> = (0..cands.len()).map(|_| rng.gen_range(0.0..3.0)).collect();
     let mut scratch = EerScratch::default();
-    let (_, fast) = evaluate_fast_led(&inp, &cands, &leads, &world, &kernel, 0.1, &mut scratch);
-    let (_, reference) = evaluate_reference_led(&inp, &cands, &leads, &world, &kernel, 0.1);
+    let (_, fast) = evaluate_fast_led(&inp, &cands, &leads, world, &kernel, 0.1, &mut scratch);
+    let (_, reference) = evaluate_reference_led(&inp, &cands, &leads, world, &kernel, 0.1);
     for (a, b) in fast.iter().zip(&reference) {
         assert!((a - b).abs() < 1e-9, "fast {a} vs reference {b}");
     }
     // The leads matter: without them some candidate's EER differs.
-    let (_, unled) = evaluate_fast(&inp, &cands, &world, &kernel, 0.1, &mut scratch);
+    let (_, unled) = evaluate_fast(&inp, &cands, world, &kernel, 0.1, &mut scratch);
     assert!(fast.iter().zip(&unled).any(|(a, b)| (a - b).abs() > 1e-6));
 }
 
