@@ -10,9 +10,10 @@
 //!    lies inside the footprint of an agent at c and outside every occlusion (the paper's
 //!    intent; the authors' code tested z_j against a footprint built around z_j, which
 //!    always passes; through the detector, the whole tag: `World::is_wholly_visible`,
-//!    the filter's model of the camera). A received z_jm gives the eq. 10 entropy; otherwise the posterior is
-//!    the missed-detection one, whose likelihood is p_miss for particles in view from c
-//!    and 1 elsewhere (negative information; with p_miss = 1 this is exactly eq. 11).
+//!    the filter's model of the camera). A received z_jm gives the eq. 10 entropy;
+//!    otherwise the posterior is the missed-detection one, whose likelihood is p_miss for
+//!    particles in view from c and 1 elsewhere (negative information; with p_miss = 1
+//!    this is exactly eq. 11).
 //! 4. EER(c) = H_now - sum_jm alpha_jm H_jm(c), with alpha_jm proportional to
 //!    w_j p(z_jm | x^_j): eq. 13's weighting, normalised so the weights form an
 //!    expectation.

@@ -120,13 +120,12 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
     let target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
     // The tracker's model of its camera is the sensor's: whole tags only through the
     // detector.
-    let seen = if spec.vision {
-        world
-            .clone()
-            .with_detection_margin(cfg.vision.detection_margin_m())
+    let margin_m = if spec.vision {
+        cfg.vision.detection_margin_m()
     } else {
-        world.clone()
+        0.0
     };
+    let seen = world.clone().with_detection_margin(margin_m);
     let tracker = Tracker::new(
         cfg.tracker_params(spec.guidance, false),
         seen,

@@ -169,6 +169,10 @@ impl PolygonEnu {
         if self.contains(p) {
             return true;
         }
+        if margin_m <= 0.0 {
+            // Exactly `contains` (the analytic sensor's worlds, on every particle).
+            return false;
+        }
         let n = self.vertices.len();
         (0..n).any(|i| {
             let (a, c) = (self.vertices[i], self.vertices[(i + 1) % n]);
