@@ -1,0 +1,241 @@
+//! Flying the vehicle: modes, arming, take-off and hold, each as its firmware wants it.
+
+use super::*;
+
+/// The newest STATUSTEXT waiting in `rx`, into `said` (events lost to a lagging receiver
+/// are skipped).
+fn latest_text(rx: &mut broadcast::Receiver<LinkEvent>, said: &mut Option<String>) {
+    loop {
+        match rx.try_recv() {
+            Ok(LinkEvent::Text(t)) => *said = Some(t),
+            Ok(_) | Err(broadcast::error::TryRecvError::Lagged(_)) => {}
+            Err(_) => return,
+        }
+    }
+}
+
+impl VehicleLink {
+    /// MAV_CMD_DO_SET_MODE with the firmware's encoding; waits until the heartbeat shows it.
+    pub async fn set_mode(&self, mode: Mode) -> Result<(), LinkError> {
+        let flavor = self.flavor();
+        let (p2, p3) = mode
+            .do_set_mode_params(flavor)
+            .ok_or(LinkError::NoSuchMode { flavor, mode })?;
+        self.state.lock().expect("state poisoned").commanded_mode = Some(mode);
+        self.command(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, p2, p3, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await?;
+        self.wait_for(
+            |s| s.mode == Some(mode),
+            &format!("mode {mode:?}"),
+            Duration::from_secs(3),
+        )
+        .await
+    }
+
+    /// Arms (MAV_CMD_COMPONENT_ARM_DISARM, param1 = 1) and waits for the armed heartbeat.
+    /// Arms, retrying while the vehicle refuses (an estimator still settling after boot:
+    /// ArduCopter refuses for ~40 s with "Arm: Need Position Estimate") until `timeout`,
+    /// saying each refusal's reason; the error carries the vehicle's last reason.
+    pub async fn arm_when_ready(&self, timeout: Duration) -> Result<(), LinkError> {
+        self.arm_in_mode_when_ready(None, timeout).await
+    }
+
+    /// [`Self::arm_when_ready`], entering `mode` again before each attempt when the vehicle
+    /// is not in it: ArduCopter SITL drops a GUIDED set during its boot back to STABILIZE,
+    /// and a takeoff from there is refused.
+    pub async fn arm_in_mode_when_ready(
+        &self,
+        mode: Option<Mode>,
+        timeout: Duration,
+    ) -> Result<(), LinkError> {
+        let until = Instant::now() + timeout;
+        // One subscription for the whole wait: the vehicle's reason may come just before or
+        // just after its COMMAND_ACK (the mock sends it after; the firmwares queue it).
+        let mut texts = self.events();
+        let mut said: Option<String> = None;
+        loop {
+            if let Some(m) = mode {
+                if self.state().mode != Some(m) {
+                    if let Err(e) = self.set_mode(m).await {
+                        tracing::warn!("the vehicle refuses {m:?}: {e}; retrying");
+                    }
+                }
+            }
+            let refusal = match self.arm().await {
+                Ok(()) => return Ok(()),
+                Err(LinkError::Refused { result, .. }) => format!("{result:?}"),
+                Err(e) => return Err(e),
+            };
+            // Time for a STATUSTEXT that follows the ACK.
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            latest_text(&mut texts, &mut said);
+            let reason = said.clone().unwrap_or(refusal);
+            let left = until
+                .saturating_duration_since(Instant::now())
+                .as_secs_f64();
+            if left <= 0.0 {
+                return Err(LinkError::NotReadyToArm {
+                    reason,
+                    seconds: timeout.as_secs_f64(),
+                });
+            }
+            tracing::warn!("the vehicle refuses to arm: {reason}; retrying ({left:.0} s left)");
+            tokio::time::sleep(Duration::from_secs(2).min(Duration::from_secs_f64(left))).await;
+            // A new attempt: only what the vehicle says from now on counts as its reason.
+            latest_text(&mut texts, &mut None);
+        }
+    }
+
+    /// Arms once.
+    pub async fn arm(&self) -> Result<(), LinkError> {
+        self.command(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await?;
+        self.wait_for(|s| s.armed, "armed", Duration::from_secs(3))
+            .await
+    }
+
+    /// Polls the state until `pred` holds.
+    pub async fn wait_for(
+        &self,
+        pred: impl Fn(&VehicleState) -> bool,
+        what: &str,
+        timeout: Duration,
+    ) -> Result<(), LinkError> {
+        let until = Instant::now() + timeout;
+        while !pred(&self.state()) {
+            if Instant::now() > until {
+                return Err(LinkError::Timeout {
+                    what: what.to_string(),
+                    seconds: timeout.as_secs_f64(),
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        Ok(())
+    }
+
+    /// Takes off to `altitude_m` above the origin and enters the tracking mode, as each
+    /// firmware wants it:
+    /// * PX4: stream setpoints (here, at altitude) for more than 1 s, then OFFBOARD, then arm;
+    ///   the vehicle climbs to the setpoint.
+    /// * ArduPilot: GUIDED, arm, MAV_CMD_NAV_TAKEOFF, wait for the altitude (a position
+    ///   target sent earlier would cancel the takeoff), then stream setpoints.
+    pub async fn take_off(&self, altitude_m: f64, timeout: Duration) -> Result<(), LinkError> {
+        let here = self.position_enu().unwrap_or(PositionEnu {
+            x_east_m: 0.0,
+            y_north_m: 0.0,
+            z_up_m: 0.0,
+        });
+        let above = PositionEnu {
+            z_up_m: altitude_m,
+            ..here
+        };
+        match self.flavor() {
+            Flavor::Px4 => {
+                self.set_setpoint(above, 0.0)?;
+                tokio::time::sleep(Duration::from_millis(1200)).await;
+                self.set_mode(Mode::Offboard).await?;
+                self.arm_when_ready(timeout).await?;
+            }
+            Flavor::ArduPilot => {
+                self.set_mode(Mode::Guided).await?;
+                self.arm_in_mode_when_ready(Some(Mode::Guided), timeout)
+                    .await?;
+                if self.state().mode != Some(Mode::Guided) {
+                    self.set_mode(Mode::Guided).await?;
+                }
+                self.command(
+                    MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, altitude_m as f32],
+                )
+                .await?;
+            }
+        }
+        let climb_mode = match self.flavor() {
+            Flavor::Px4 => Mode::Offboard,
+            Flavor::ArduPilot => Mode::Guided,
+        };
+        self.climb_to(altitude_m, climb_mode, timeout).await?;
+        if self.flavor() == Flavor::ArduPilot {
+            self.set_setpoint(above, 0.0)?;
+        }
+        Ok(())
+    }
+
+    /// Waits for the climb to 95 % of `altitude_m`. Gives up at once, saying why, when the
+    /// vehicle disarms (its auto-disarm, the pilot's switch, a failsafe) or leaves
+    /// `climb_mode` (the pilot or a GCS took it: never fought); on the timeout the error says
+    /// how high it got, whether it was armed, its mode and its last STATUSTEXT.
+    async fn climb_to(
+        &self,
+        altitude_m: f64,
+        climb_mode: Mode,
+        timeout: Duration,
+    ) -> Result<(), LinkError> {
+        let until = Instant::now() + timeout;
+        let mut texts = self.events();
+        let mut said: Option<String> = None;
+        loop {
+            let s = self.state();
+            let up_m = s.local_ned.map(|(_, p, _)| -p.z_down_m);
+            if up_m.is_some_and(|z| z >= 0.95 * altitude_m) {
+                return Ok(());
+            }
+            latest_text(&mut texts, &mut said);
+            let at = |s: &VehicleState| {
+                let height = up_m.map_or("no local position".into(), |z| format!("{z:.2} m up"));
+                let mode = s.mode.map_or("no mode".into(), |m| m.to_string());
+                let text = said.as_deref().map_or(String::new(), |t| {
+                    format!("; the vehicle's last message: \"{t}\"")
+                });
+                format!("{height}, {mode}{text}")
+            };
+            if !s.armed {
+                return Err(LinkError::TakeoffAbandoned {
+                    why: format!(
+                        "the vehicle disarmed during the climb to {altitude_m} m ({})",
+                        at(&s)
+                    ),
+                });
+            }
+            if s.mode.is_some_and(|m| m != climb_mode) {
+                return Err(LinkError::TakeoffAbandoned {
+                    why: format!(
+                        "the vehicle left {climb_mode} during the climb to {altitude_m} m ({})",
+                        at(&s)
+                    ),
+                });
+            }
+            if Instant::now() > until {
+                return Err(LinkError::Timeout {
+                    what: format!("altitude {altitude_m} m (armed, {})", at(&s)),
+                    seconds: timeout.as_secs_f64(),
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
+    /// Clean stop: hold position and altitude (PX4 AUTO.LOITER; ArduPilot BRAKE, else
+    /// GUIDED at the current position: its LOITER descends without RC throttle) and stop
+    /// streaming.
+    pub async fn hold(&self) -> Result<(), LinkError> {
+        let flavor = self.flavor();
+        let r = self.set_mode(Mode::hold_for(flavor)).await;
+        if r.is_err() && flavor == Flavor::ArduPilot {
+            // BRAKE refused: GUIDED at the current position also holds altitude without RC.
+            if let Some(p) = self.position_enu() {
+                self.set_setpoint(p, 0.0)?;
+                return self.set_mode(Mode::Guided).await;
+            }
+        }
+        *self.streamer.target_ned.lock().expect("streamer poisoned") = None;
+        r
+    }
+}

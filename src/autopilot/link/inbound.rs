@@ -1,0 +1,264 @@
+//! What the link reads: one dispatch over the vehicle's messages into the vehicle state.
+
+use super::*;
+
+/// Follows the vehicle's boot clock; a jump back by more than a second (more than any
+/// reordering on a link) is a reboot.
+fn boot_clock(s: &mut VehicleState, events: &broadcast::Sender<LinkEvent>, t_ms: u32) {
+    if let Some(last) = s.time_boot_ms {
+        if t_ms.saturating_add(1000) < last {
+            s.reboots += 1;
+            tracing::warn!("vehicle rebooted (boot clock {last} ms -> {t_ms} ms)");
+            let _ = events.send(LinkEvent::VehicleRebooted);
+            s.time_boot_ms = Some(t_ms);
+            return;
+        }
+    }
+    s.time_boot_ms = Some(s.time_boot_ms.map_or(t_ms, |l| l.max(t_ms)));
+}
+
+// Long because it is one dispatch over the MAVLink messages the link reads, one short arm
+// each, so what updates the vehicle state is in one place.
+pub(super) fn on_message(
+    state: &Mutex<VehicleState>,
+    events: &broadcast::Sender<LinkEvent>,
+    ids: Ids,
+    h: &MavHeader,
+    m: &MavMessage,
+) {
+    let me = ids.me;
+    let now = Instant::now();
+    let mut s = state.lock().expect("state poisoned");
+    let sender = (h.system_id as u8, h.component_id);
+    let from_vehicle = s.address == Some(sender);
+    if !from_vehicle && !matches!(m, MavMessage::HEARTBEAT(_)) {
+        return;
+    }
+    if non_finite_telemetry(m) {
+        s.non_finite_dropped += 1;
+        if s.non_finite_dropped.is_power_of_two() {
+            tracing::warn!(
+                "dropped {} telemetry message(s) with NaN or infinite fields so far (latest: {})",
+                s.non_finite_dropped,
+                mavlink::Message::message_name(m)
+            );
+        }
+        return;
+    }
+    match m {
+        MavMessage::HEARTBEAT(hb) => {
+            let flavor = match hb.autopilot {
+                MavAutopilot::MAV_AUTOPILOT_PX4 => Flavor::Px4,
+                MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Flavor::ArduPilot,
+                _ => return, // a GCS, a camera, another companion
+            };
+            if !lock_onto(&mut s, ids.vehicle, sender) {
+                return;
+            }
+            s.flavor = Some(flavor);
+            s.last_heartbeat = Some(now);
+            if s.lost {
+                s.lost = false;
+                tracing::info!("vehicle heartbeat back");
+                let _ = events.send(LinkEvent::VehicleBack);
+            }
+            s.armed = hb
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            s.has_armed |= s.armed;
+            let mode = Mode::from_custom_mode(flavor, hb.custom_mode);
+            if let Some(old) = s.mode {
+                if old != mode {
+                    // A command explains one change: a later return to the same mode by
+                    // the vehicle itself (PX4 back to OFFBOARD after a failsafe) is its own.
+                    let commanded = s.commanded_mode == Some(mode);
+                    if commanded {
+                        s.commanded_mode = None;
+                    } else if s.has_armed {
+                        tracing::warn!(
+                            "vehicle changed mode {old:?} -> {mode:?} by itself (failsafe?)"
+                        );
+                        s.unexpected_mode_changes.push((old, mode));
+                    } else {
+                        tracing::info!(
+                            "vehicle changed mode {old:?} -> {mode:?} by itself before arming (its start-up, or the pilot on the ground)"
+                        );
+                        s.mode_changes_before_arming.push((old, mode));
+                    }
+                    let _ = events.send(LinkEvent::ModeChanged {
+                        from: old,
+                        to: mode,
+                        commanded,
+                    });
+                }
+            }
+            s.mode = Some(mode);
+        }
+        MavMessage::COMMAND_ACK(a) => {
+            // ACKs addressed to someone else are not ours.
+            let ours = (a.target_system == 0 || a.target_system == me.0)
+                && (a.target_component == 0 || a.target_component == me.1);
+            if ours {
+                let _ = events.send(LinkEvent::Ack {
+                    command: a.command,
+                    result: a.result,
+                });
+            }
+        }
+        MavMessage::LOCAL_POSITION_NED(p) => {
+            boot_clock(&mut s, events, p.time_boot_ms);
+            s.local_ned = Some((
+                now,
+                PositionNed {
+                    x_north_m: p.x as f64,
+                    y_east_m: p.y as f64,
+                    z_down_m: p.z as f64,
+                },
+                [p.vx, p.vy, p.vz],
+            ));
+        }
+        MavMessage::ATTITUDE(a) => {
+            boot_clock(&mut s, events, a.time_boot_ms);
+            s.attitude = Some((now, [a.roll, a.pitch, a.yaw]));
+        }
+        MavMessage::GLOBAL_POSITION_INT(g) => {
+            s.global = Some((
+                now,
+                g.lat as f64 * 1e-7,
+                g.lon as f64 * 1e-7,
+                g.relative_alt as f64 * 1e-3,
+            ));
+            s.home_alt_amsl_m = Some((g.alt as f64 - g.relative_alt as f64) * 1e-3);
+        }
+        MavMessage::EXTENDED_SYS_STATE(e) => s.landed = Some((now, e.landed_state)),
+        MavMessage::GPS_GLOBAL_ORIGIN(o) => {
+            s.global_origin = Some(crate::geodesy::GeodeticWgs84 {
+                lat_deg: o.latitude as f64 * 1e-7,
+                lon_deg: o.longitude as f64 * 1e-7,
+                alt_m: o.altitude as f64 * 1e-3,
+            })
+        }
+        MavMessage::SYS_STATUS(st) => s.battery_v = Some((now, st.voltage_battery as f64 * 1e-3)),
+        MavMessage::PARAM_VALUE(p) => {
+            let _ = events.send(LinkEvent::Param {
+                name: p
+                    .param_id
+                    .to_str()
+                    .unwrap_or("")
+                    .trim_end_matches('\0')
+                    .to_string(),
+                wire: p.param_value,
+                ty: param_type_of(p.param_type),
+                index: p.param_index,
+                count: p.param_count,
+            });
+        }
+        MavMessage::STATUSTEXT(t) => {
+            let text = t
+                .text
+                .to_str()
+                .unwrap_or("")
+                .trim_end_matches('\0')
+                .to_string();
+            tracing::info!("vehicle: {text}");
+            let _ = events.send(LinkEvent::Text(text));
+        }
+        _ => {}
+    }
+}
+
+/// The link's message handling without a socket, for the fuzz tests (`tests/fuzz_mavlink.rs`):
+/// messages go through the same `on_message` the reader task calls.
+#[doc(hidden)]
+pub mod fuzz {
+    use super::*;
+
+    /// A vehicle state fed directly.
+    pub struct LinkUnderTest {
+        state: Mutex<VehicleState>,
+        events: broadcast::Sender<LinkEvent>,
+    }
+
+    impl LinkUnderTest {
+        /// A link with our ids 1/191 and no configured vehicle.
+        pub fn new() -> Self {
+            Self {
+                state: Mutex::new(VehicleState::default()),
+                events: broadcast::channel(16).0,
+            }
+        }
+
+        /// The state so far.
+        pub fn state(&self) -> VehicleState {
+            self.state.lock().expect("state poisoned").clone()
+        }
+    }
+
+    impl Default for LinkUnderTest {
+        fn default() -> Self {
+            Self::new()
+        }
+    }
+
+    /// One received message, as the reader task hands it over.
+    pub fn feed(link: &mut LinkUnderTest, h: MavHeader, m: &MavMessage) {
+        let ids = Ids {
+            me: (1, 191),
+            vehicle: None,
+        };
+        on_message(&link.state, &link.events, ids, &h, m);
+    }
+}
+
+/// Our ids and the vehicle's, if configured.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Ids {
+    pub(super) me: (u8, u8),
+    pub(super) vehicle: Option<(u8, u8)>,
+}
+
+/// Whether an autopilot's heartbeat from `sender` is the vehicle's: the configured one, or
+/// the first heard. Any other is ignored and reported once; a vehicle that reboots keeps its
+/// ids and stays the vehicle.
+fn lock_onto(s: &mut VehicleState, configured: Option<(u8, u8)>, sender: (u8, u8)) -> bool {
+    /// MAV_COMP_ID_AUTOPILOT1: the flight controller itself.
+    const AUTOPILOT: u8 = 1;
+    let ours = match (s.address, configured) {
+        (_, Some(wanted)) => wanted == sender,
+        // Another component of the same system that calls itself an autopilot heard first
+        // (a camera or gimbal manager): the flight controller's own component wins.
+        (Some(locked), None) => locked == sender || (locked.0 == sender.0 && sender.1 == AUTOPILOT),
+        (None, None) => true,
+    };
+    if ours {
+        s.address = Some(sender);
+    } else if s.ignored_autopilots.insert(sender) {
+        let to = s.address.or(configured).expect("locked or configured");
+        tracing::warn!(
+            "ignoring the autopilot of system {} component {}: infotrack flies system {} component {} only",
+            sender.0,
+            sender.1,
+            to.0,
+            to.1
+        );
+    }
+    ours
+}
+
+/// A position, velocity or attitude message with a NaN or infinite field: it must not
+/// reach the vehicle state the tracker and the geofence read.
+fn non_finite_telemetry(m: &MavMessage) -> bool {
+    let bad = |v: &[f32]| v.iter().any(|x| !x.is_finite());
+    match m {
+        MavMessage::LOCAL_POSITION_NED(p) => bad(&[p.x, p.y, p.z, p.vx, p.vy, p.vz]),
+        MavMessage::ATTITUDE(a) => bad(&[
+            a.roll,
+            a.pitch,
+            a.yaw,
+            a.rollspeed,
+            a.pitchspeed,
+            a.yawspeed,
+        ]),
+        _ => false,
+    }
+}
