@@ -1,0 +1,201 @@
+//! Reaching the vehicle and getting it airborne: connection, the world's origin, take-off
+//! or the pilot's, and the start position.
+
+use super::*;
+
+/// Phase 2: starts the in-process mock if asked, opens the link and waits for the
+/// vehicle's heartbeat.
+pub(super) async fn connect(
+    cfg: &Config,
+    opts: &RunOptions,
+    signal: &mut ShutdownSignal,
+) -> Result<Vehicle, DaemonError> {
+    let d = &cfg.daemon;
+    let (mock, url) = match d.vehicle.as_str() {
+        "mock:px4" => {
+            let (m, u) = start_mock(cfg, Flavor::Px4).await?;
+            (Some(m), u)
+        }
+        "mock:ardupilot" => {
+            let (m, u) = start_mock(cfg, Flavor::ArduPilot).await?;
+            (Some(m), u)
+        }
+        url => (None, url.to_string()),
+    };
+    if mock.is_none()
+        && opts
+            .faults
+            .iter()
+            .any(|f| !matches!(f.kind, FaultKind::CameraFreeze | FaultKind::PipelinePanic))
+    {
+        return Err(DaemonError::LinkFaultNeedsMock);
+    }
+    let mut lc = LinkConfig::new(&url);
+    lc.system_id = d.system_id;
+    lc.component_id = d.component_id;
+    lc.setpoint_hz = d.setpoint_hz;
+    lc.geofence_enu = Some(cfg.workspace_enu);
+    lc.tlog = opts.tlog.clone();
+    lc.vehicle = d.vehicle_id.map(|[s, c]| (s, c));
+    lc.signing_key = d.signing_key.as_deref().map(SigningKey::load).transpose()?;
+    let link = VehicleLink::connect(lc).await?;
+    let flavor = tokio::select! {
+        f = link.wait_vehicle(Duration::from_secs_f64(d.connect_timeout_s)) => f?,
+        _ = &mut *signal => {
+            return Err(DaemonError::Interrupted("while waiting for the vehicle; nothing was commanded"))
+        }
+    };
+    tracing::info!("vehicle: {flavor} on {url}");
+    vehicle_speed::warn_if_slower_than_planned(cfg, &link, flavor).await;
+    Ok(Vehicle {
+        link,
+        flavor,
+        name: d.vehicle.clone(),
+        url,
+        mock,
+    })
+}
+
+/// `[world]`: the vehicle's local origin (GPS_GLOBAL_ORIGIN, asked for once) must be known
+/// and within the tolerance of the world's before anything is commanded; the link then
+/// converts every position and setpoint between the vehicle's frame and the world's.
+pub(super) async fn check_world_origin(
+    w: &crate::config::WorldConfig,
+    link: &VehicleLink,
+    timeout_s: f64,
+) -> Result<(), DaemonError> {
+    const GPS_GLOBAL_ORIGIN_ID: u32 = 49;
+    if let Err(e) = link.request_message(GPS_GLOBAL_ORIGIN_ID).await {
+        // Some firmware streams it without answering the request: wait for it anyway.
+        tracing::warn!("asking for GPS_GLOBAL_ORIGIN: {e}");
+    }
+    let until = Instant::now() + Duration::from_secs_f64(timeout_s);
+    let origin = loop {
+        if let Some(o) = link.state().global_origin {
+            break o;
+        }
+        if Instant::now() > until {
+            return Err(DaemonError::NoVehicleOrigin(timeout_s));
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    let distance_m = w.origin.horizontal_distance_m(&origin);
+    if distance_m > w.origin_tolerance_m {
+        return Err(DaemonError::OriginTooFar {
+            vehicle_lat: origin.lat_deg,
+            vehicle_lon: origin.lon_deg,
+            world_lat: w.origin.lat_deg,
+            world_lon: w.origin.lon_deg,
+            distance_m,
+            tolerance_m: w.origin_tolerance_m,
+        });
+    }
+    let placement = crate::geodesy::WorldPlacement::new(w.origin, origin);
+    let [e, n] = placement.vehicle_origin_in_world_en_m();
+    tracing::info!(
+        "the vehicle's origin is {distance_m:.2} m from the world's ({e:.2} m east, {n:.2} m \
+         north of it): positions and setpoints are converted between the two frames"
+    );
+    link.place_in_world(placement);
+    Ok(())
+}
+
+/// Phase 3: telemetry, then the takeoff: infotrack's own (`auto`) or the pilot's.
+pub(super) async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
+    link.request_telemetry().await?;
+    match cfg.daemon.engage {
+        Engage::Auto => take_off_to_start(cfg, link).await,
+        Engage::Pilot => wait_for_pilot_takeoff(link).await,
+    }
+}
+
+/// `daemon.engage = "pilot"`: waits, as long as it takes, until the pilot has the vehicle
+/// armed and off the ground. Nothing is commanded.
+pub(super) async fn wait_for_pilot_takeoff(link: &VehicleLink) -> Result<(), LinkError> {
+    /// Above this height over the origin a vehicle that reports no landed state is airborne.
+    const AIRBORNE_M: f64 = 0.5;
+    tracing::warn!("daemon.engage = pilot: waiting for the pilot to take off");
+    let _ = link
+        .send_statustext(
+            mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_INFO,
+            "infotrack: ready; waiting for the pilot's takeoff",
+        )
+        .await;
+    loop {
+        let s = link.state();
+        let in_air = match s.landed {
+            Some((_, l)) => {
+                l == mavlink::dialects::ardupilotmega::MavLandedState::MAV_LANDED_STATE_IN_AIR
+            }
+            None => s
+                .local_ned
+                .is_some_and(|(_, p, _)| -p.z_down_m > AIRBORNE_M),
+        };
+        if s.armed && in_air {
+            tracing::warn!(
+                "the pilot has the vehicle in the air; infotrack takes over when the mode is switched to {}",
+                Mode::companion_for(link.flavor())
+            );
+            return Ok(());
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// `daemon.engage = "auto"`: takeoff to the tracking altitude, then the scenario's start
+/// point (`agent.start_enu_m`, where the simulator's agent starts) before tracking begins.
+pub(super) async fn take_off_to_start(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
+    let d = &cfg.daemon;
+    link.take_off(
+        cfg.agent.altitude_m,
+        Duration::from_secs_f64(d.takeoff_timeout_s),
+    )
+    .await?;
+    let start = PositionEnu {
+        x_east_m: cfg.agent.start_enu_m[0],
+        y_north_m: cfg.agent.start_enu_m[1],
+        z_up_m: cfg.agent.altitude_m,
+    };
+    link.set_setpoint(start, 0.0)?;
+    let want = start.to_ned();
+    let tol = cfg.start_tolerance_m();
+    let mut close_since: Option<Instant> = None;
+    // Not VehicleLink::wait_for: that polls every 20 ms, and the instant tracking begins
+    // decides the simulated flights (and the recorded numbers of each seed).
+    let until = Instant::now() + Duration::from_secs_f64(d.takeoff_timeout_s);
+    loop {
+        if let Some((_, p, v)) = link.local_ned_in_world() {
+            let off = (p.x_north_m - want.x_north_m)
+                .hypot(p.y_east_m - want.y_east_m)
+                .hypot(p.z_down_m - want.z_down_m);
+            let speed = v.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
+            if off < tol && speed < tol {
+                return Ok(());
+            }
+            if off < 10.0 * tol {
+                let since = *close_since.get_or_insert_with(Instant::now);
+                if since.elapsed().as_secs_f64() >= d.start_settle_s {
+                    tracing::warn!(
+                        "the vehicle hovers {off:.2} m from the start point at {speed:.2} m/s \
+                         and does not settle within daemon.start_tolerance_m = {tol} m; \
+                         tracking begins anyway"
+                    );
+                    return Ok(());
+                }
+            } else {
+                close_since = None;
+            }
+        }
+        if Instant::now() > until {
+            return Err(LinkError::Timeout {
+                what: format!(
+                    "the vehicle to reach the start point agent.start_enu_m = {:?} \
+                     (daemon.takeoff_timeout_s)",
+                    cfg.agent.start_enu_m
+                ),
+                seconds: d.takeoff_timeout_s,
+            });
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
