@@ -1,0 +1,227 @@
+//! The guidance decision: the law in force (or the failsafe's), EER's plan and the
+//! setpoint it becomes.
+
+use super::*;
+
+impl Tracker {
+    /// One guidance decision at `t_s` for a vehicle at `vehicle_enu` (`truth`: the true
+    /// target's position and velocity, world ENU, where a simulator knows them). `None`: no
+    /// decision is taken on a stale vehicle state (link lost). Public for `infotrack
+    /// replay`.
+    pub fn decide(
+        &mut self,
+        t_s: f64,
+        vehicle_enu: &Enu2,
+        truth: Option<(Enu2, Enu2)>,
+        clock: &dyn Clock,
+    ) -> Result<Option<Decision>, TrackerError> {
+        if self.state == TrackState::LinkLost {
+            return Ok(None);
+        }
+        let started = clock.now_s();
+        let decided = self.choose(t_s, vehicle_enu, truth);
+        let compute_ms = (clock.now_s() - started) * 1e3;
+        let failsafe = self.params.failsafe;
+        let over_budget = failsafe.is_some_and(|f| compute_ms > f.guidance_budget_ms);
+        let command = match decided {
+            Ok(c) => c,
+            Err(e) if failsafe.is_some() => {
+                return Ok(Some(Decision::Failed {
+                    reason: e.to_string(),
+                    compute_ms,
+                    over_budget,
+                }))
+            }
+            Err(e) => return Err(e),
+        };
+        if over_budget {
+            return Ok(Some(Decision::Overrun { compute_ms }));
+        }
+        let command = match command {
+            Command::GoTo {
+                position_enu,
+                velocity_enu,
+            } => Command::GoTo {
+                position_enu: self.world.workspace_enu.clamp(&position_enu),
+                velocity_enu,
+            },
+            hold => hold,
+        };
+        self.command = Some(command);
+        Ok(Some(Decision::Command {
+            command,
+            compute_ms,
+        }))
+    }
+
+    /// What the guidance law (or the failsafe in force) says, before the geofence.
+    pub(super) fn choose(
+        &mut self,
+        t_s: f64,
+        vehicle_enu: &Enu2,
+        truth: Option<(Enu2, Enu2)>,
+    ) -> Result<Command, TrackerError> {
+        if let Some(f) = self.params.failsafe {
+            match (self.state, f.fallback) {
+                (TrackState::CameraLost, _) | (TrackState::Lost, LostFallback::Hold) => {
+                    return Ok(Command::HoldHere)
+                }
+                (TrackState::Lost, LostFallback::Lawn) => {
+                    return Ok(Command::fixed(self.lawn.next_point()))
+                }
+                _ => {}
+            }
+        }
+        Ok(match self.params.guidance {
+            GuidanceKind::Eer => self.plan_eer(t_s, vehicle_enu)?,
+            GuidanceKind::Pfwm => Command::GoTo {
+                position_enu: self.estimator.mean(),
+                velocity_enu: self.confident_velocity(),
+            },
+            GuidanceKind::Kf => match &self.side_kf {
+                Some(k) => Command::GoTo {
+                    position_enu: k.mean(),
+                    velocity_enu: k.velocity(),
+                },
+                None => Command::GoTo {
+                    position_enu: self.estimator.mean(),
+                    velocity_enu: self.estimator.velocity(),
+                },
+            },
+            GuidanceKind::Truth => {
+                let (p, v) = truth.ok_or(TrackerError::NoTruth)?;
+                Command::GoTo {
+                    position_enu: p,
+                    velocity_enu: v,
+                }
+            }
+            GuidanceKind::Lawn => Command::fixed(match self.last_measurement {
+                Some((tm, z)) if t_s - tm <= self.params.lawn.track_measurement_for_s => z,
+                _ => self.lawn.next_point(),
+            }),
+        })
+    }
+
+    /// The estimate's velocity when the belief is concentrated enough to be over the
+    /// target (its largest standard deviation within half the footprint's smaller side);
+    /// zero while it is spread out, when a mean velocity means nothing.
+    pub(super) fn confident_velocity(&self) -> Enu2 {
+        let fp = &self.world.footprint;
+        if self.estimator.largest_sd_m() <= fp.quarter_view_m() {
+            self.estimator.velocity()
+        } else {
+            Enu2::zeros()
+        }
+    }
+
+    /// How long after the last measurement the belief stays local (the one that measurement
+    /// left): the plan's horizon, or, if longer, the time the target, at the speed it was last
+    /// seen at, takes to cross the camera's view along its shorter side. Until then the target
+    /// may still be in or by the view it was lost from and EER's argmax follows it; after it,
+    /// the belief may have split (an occluded junction) and EER keeps to one mode. With one
+    /// horizon alone, the lab's closed loop lost 2.5 points of frames with the tag (seeds
+    /// 1-16: a slow target hidden for seconds under a 1 m square, the argmax still the right
+    /// move); with the crossing time it is level (BENCHMARKS.md "Field scale, part 27").
+    pub(super) fn local_for_s(&self, horizon_s: f64) -> f64 {
+        let fp = self.world.footprint;
+        let view_m = 2.0 * fp.half_width_m.min(fp.half_height_m);
+        horizon_s.max(view_m / self.last_seen_speed_mps.max(1e-9))
+    }
+
+    /// EER's waypoint is where to be at the end of the horizon; with the target's velocity
+    /// (when the belief is concentrated) the setpoint moves so as to get there then, riding
+    /// along with the target instead of trailing it.
+    pub(super) fn plan_eer(
+        &mut self,
+        t_s: f64,
+        vehicle_enu: &Enu2,
+    ) -> Result<Command, TrackerError> {
+        let over_target_velocity_enu = self.confident_velocity();
+        let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
+        // Searching: EER then keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27").
+        let searching = self.respread_done
+            || is_searching(self.last_measurement, t_s, self.local_for_s(horizon_s));
+        let Estimator::Particle { pf, model } = &mut self.estimator else {
+            // Refused at construction by check_combination.
+            return Err(TrackerError::Incompatible {
+                guidance: GuidanceKind::Eer,
+                motion: "kf".into(),
+                reason: "eer needs a particle set".into(),
+            });
+        };
+        self.planner.use_intercepts(self.last_measurement.is_some());
+        self.planner.set_searching(searching);
+        // EER plans with the prediction the filter makes: where the filter re-routes its
+        // constant-velocity belief at junctions, so does the rollout. Straight on, the
+        // predicted tracks ran off the road past every corner and EER sent the drone
+        // there: it overshot the car's turns and chased from behind (BENCHMARKS.md "Field
+        // scale, part 24").
+        let reroutes = self.last_measurement.is_some()
+            && self.params.injection_share > 0.0
+            && !model.knows_the_roads();
+        let on_road_m = 0.5 * self.params.filter.road_sigma_m.unwrap_or(0.0);
+        self.planner.reroute_rollout(reroutes.then_some(on_road_m));
+        let d = self.planner.plan(
+            pf,
+            model.as_mut(),
+            vehicle_enu,
+            &self.world,
+            &mut self.rng_guidance,
+        )?;
+        self.entropy = d.h_now;
+        self.last_eer = d.eer;
+        let velocity_enu = if over_target_velocity_enu == Enu2::zeros() {
+            approach_velocity(
+                vehicle_enu,
+                &d.waypoint_enu,
+                horizon_s,
+                self.params.eer.reach_m,
+                self.params.eer.reach_shape,
+            )
+        } else {
+            over_target_velocity_enu
+        };
+        Ok(Command::GoTo {
+            position_enu: d.waypoint_enu - velocity_enu * horizon_s,
+            velocity_enu,
+        })
+    }
+}
+
+/// Whether EER is searching at `t_s`: the target never seen, or unseen for longer than
+/// `local_s` ([`Tracker::local_for_s`]), so that the belief may have split where it went out
+/// of view (an occluded junction, a covered crossing). Tracking through a loss with the
+/// paper's argmax, the plan flipped between a covered crossing's two exits from one plan to
+/// the next and the drone saw neither (field-eight: 39 % of the time in view; BENCHMARKS.md
+/// "Field scale, part 27").
+pub(super) fn is_searching(last_measurement: Option<(f64, Enu2)>, t_s: f64, local_s: f64) -> bool {
+    last_measurement.map_or(true, |(seen_s, _)| t_s - seen_s > local_s)
+}
+
+/// The planned motion toward a waypoint beyond every candidate of the reachable region (a
+/// square's corners lie at sqrt(2) x reach, a disc's rim at reach; beyond them a waypoint is
+/// a far predicted particle) while the belief is
+/// spread out: the agent's top speed along the way, so that the setpoint (`reach` short of
+/// the waypoint, moving to it) carries the transit's speed as feed-forward instead of
+/// trailing it by speed / position gain. Otherwise zero, a fixed point, which arrives
+/// sooner than a setpoint that spreads the move over the horizon (that cost the lab's closed
+/// loop 12-17 points of FOV). The threshold was `reach` at first; at the grid's corners the
+/// transit cost the lab's closed loop 1.3 points over 16 seeds (BENCHMARKS "Field scale,
+/// part 7").
+pub(super) fn approach_velocity(
+    vehicle_enu: &Enu2,
+    waypoint_enu: &Enu2,
+    horizon_s: f64,
+    reach_m: f64,
+    reach_shape: ReachShape,
+) -> Enu2 {
+    let to_go = waypoint_enu - vehicle_enu;
+    let distance = to_go.norm();
+    // The tolerance keeps the region's own farthest candidates (a square's corners, a
+    // disc's rim, exactly there before rounding) on the fixed-point side.
+    let farthest_candidate_m = reach_shape.farthest_in_reaches() * reach_m + 1e-9;
+    if distance <= farthest_candidate_m || horizon_s <= 0.0 {
+        return Enu2::zeros();
+    }
+    to_go * (reach_m / distance / horizon_s)
+}
