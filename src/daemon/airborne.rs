@@ -111,7 +111,7 @@ pub(super) async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkE
 
 /// `daemon.engage = "pilot"`: waits, as long as it takes, until the pilot has the vehicle
 /// armed and off the ground. Nothing is commanded.
-pub(super) async fn wait_for_pilot_takeoff(link: &VehicleLink) -> Result<(), LinkError> {
+async fn wait_for_pilot_takeoff(link: &VehicleLink) -> Result<(), LinkError> {
     /// Above this height over the origin a vehicle that reports no landed state is airborne.
     const AIRBORNE_M: f64 = 0.5;
     tracing::warn!("daemon.engage = pilot: waiting for the pilot to take off");
@@ -144,7 +144,7 @@ pub(super) async fn wait_for_pilot_takeoff(link: &VehicleLink) -> Result<(), Lin
 
 /// `daemon.engage = "auto"`: takeoff to the tracking altitude, then the scenario's start
 /// point (`agent.start_enu_m`, where the simulator's agent starts) before tracking begins.
-pub(super) async fn take_off_to_start(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
+async fn take_off_to_start(cfg: &Config, link: &VehicleLink) -> Result<(), LinkError> {
     let d = &cfg.daemon;
     link.take_off(
         cfg.agent.altitude_m,

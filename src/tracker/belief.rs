@@ -89,7 +89,7 @@ impl Tracker {
     /// roads), weighted by the empty frames since (see
     /// [`ParticleFilter::spread_along_routes`]). False when it cannot be (never seen
     /// without a cue, no roads within it, or the Kalman filter).
-    pub(super) fn respread_along_routes(&mut self, t_s: f64) -> bool {
+    fn respread_along_routes(&mut self, t_s: f64) -> bool {
         let cue_roads;
         let (tm, start) = match (self.last_measurement, self.params.cue) {
             (Some((tm, zm)), _) => (tm, RouteStart::At(zm, Some(self.last_seen_velocity_enu))),

@@ -55,7 +55,7 @@ impl Tracker {
     }
 
     /// What the guidance law (or the failsafe in force) says, before the geofence.
-    pub(super) fn choose(
+    fn choose(
         &mut self,
         t_s: f64,
         vehicle_enu: &Enu2,
@@ -105,7 +105,7 @@ impl Tracker {
     /// The estimate's velocity when the belief is concentrated enough to be over the
     /// target (its largest standard deviation within half the footprint's smaller side);
     /// zero while it is spread out, when a mean velocity means nothing.
-    pub(super) fn confident_velocity(&self) -> Enu2 {
+    fn confident_velocity(&self) -> Enu2 {
         let fp = &self.world.footprint;
         if self.estimator.largest_sd_m() <= fp.quarter_view_m() {
             self.estimator.velocity()
@@ -131,11 +131,7 @@ impl Tracker {
     /// EER's waypoint is where to be at the end of the horizon; with the target's velocity
     /// (when the belief is concentrated) the setpoint moves so as to get there then, riding
     /// along with the target instead of trailing it.
-    pub(super) fn plan_eer(
-        &mut self,
-        t_s: f64,
-        vehicle_enu: &Enu2,
-    ) -> Result<Command, TrackerError> {
+    fn plan_eer(&mut self, t_s: f64, vehicle_enu: &Enu2) -> Result<Command, TrackerError> {
         let over_target_velocity_enu = self.confident_velocity();
         let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
         // Searching: EER then keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27").

@@ -130,7 +130,7 @@ impl ParticleFilter {
     /// One velocity per particle (world ENU, m/s), each a particle's mean velocity over its
     /// history, the particle drawn by weight; each particle's own where the weights are
     /// degenerate (all zero or not finite: a recovery).
-    pub(super) fn velocities_drawn_by_weight<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<Enu2> {
+    fn velocities_drawn_by_weight<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<Enu2> {
         let by_weight =
             self.weights.iter().all(|w| w.is_finite()) && self.weights.iter().sum::<f64>() > 0.0;
         (0..self.weights.len())

@@ -239,7 +239,7 @@ impl ParticleFilter {
 
     /// Particle `i` becomes a straight track along one of `roads`, ending at a point drawn
     /// on them, at a speed drawn from `speeds_mps`; false when there is no road.
-    pub(super) fn seed_on_roads<R: Rng + ?Sized>(
+    fn seed_on_roads<R: Rng + ?Sized>(
         &mut self,
         i: usize,
         roads: &RoadPieces,

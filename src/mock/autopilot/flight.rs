@@ -120,7 +120,7 @@ impl MockAutopilot {
     }
 
     /// One step of the wander's Gauss-Markov process (exact for any `dt`).
-    pub(super) fn advance_wander(&mut self, dt: f64) {
+    fn advance_wander(&mut self, dt: f64) {
         let r = self.cfg.response;
         let decay = (-dt / r.wander_correlation_s.max(1e-3)).exp();
         let spread = (1.0 - decay * decay).sqrt();
@@ -135,7 +135,7 @@ impl MockAutopilot {
         }
     }
 
-    pub(super) fn stopping_point(&self) -> [f64; 3] {
+    fn stopping_point(&self) -> [f64; 3] {
         let [x, y, z] = self.state.pos_ned_m;
         let [vx, vy, _] = self.state.vel_ned_mps;
         let a = self.limits().xy_accel_mps2.max(0.1);
