@@ -251,9 +251,42 @@ fn setpoint_rate_hz(f: &Flight) -> f64 {
     (stamps.len() - 1) as f64 / span_s
 }
 
-/// Listens to the vehicle for `seconds` after infotrack has gone: its mode and how much
-/// its altitude changed.
-async fn watch_after_stop(url: &str, seconds: f64) -> (Option<Mode>, f64) {
+/// What the vehicle did in the `seconds` after infotrack had gone: its mode, and its
+/// altitude (world up, metres) sampled every 0.1 s.
+struct AfterStop {
+    mode: Option<Mode>,
+    altitude_m: Vec<f64>,
+}
+
+impl AfterStop {
+    /// Mean altitude of the first or the last second of the watch.
+    fn mean_of_second(&self, last: bool) -> f64 {
+        let n = self.altitude_m.len().min(10);
+        let s = if last {
+            &self.altitude_m[self.altitude_m.len() - n..]
+        } else {
+            &self.altitude_m[..n]
+        };
+        s.iter().sum::<f64>() / n as f64
+    }
+
+    /// How much the altitude changed over the watch (last second's mean minus the
+    /// first's: single samples carry the estimator's own wander).
+    fn climb_m(&self) -> f64 {
+        self.mean_of_second(true) - self.mean_of_second(false)
+    }
+
+    /// The lowest altitude seen during the watch.
+    fn lowest_m(&self) -> f64 {
+        self.altitude_m
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// Listens to the vehicle for `seconds` after infotrack has gone.
+async fn watch_after_stop(url: &str, seconds: f64) -> AfterStop {
     let mut lc = LinkConfig::new(url);
     lc.system_id = 250;
     let link = VehicleLink::connect(lc).await.unwrap();
@@ -264,17 +297,43 @@ async fn watch_after_stop(url: &str, seconds: f64) -> (Option<Mode>, f64) {
     while alt(&link).is_none() && Instant::now() < until {
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
-    let before = alt(&link).expect("the vehicle reports its position");
-    tokio::time::sleep(Duration::from_secs_f64(seconds)).await;
-    let after = alt(&link).unwrap();
-    assert!(
-        before > 0.8,
-        "the vehicle was not airborne at the stop ({before} m)"
+    alt(&link).expect("the vehicle reports its position");
+    let mut altitude_m = Vec::new();
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    while Instant::now() < end {
+        altitude_m.extend(alt(&link));
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let watch = AfterStop {
+        mode: link.state().mode,
+        altitude_m,
+    };
+    println!(
+        "SITL after the stop: altitude {:.2} m (first second) -> {:.2} m (last), lowest {:.2} m over {seconds} s",
+        watch.mean_of_second(false),
+        watch.mean_of_second(true),
+        watch.lowest_m()
     );
-    (link.state().mode, after - before)
+    watch
 }
 
-/// Filter steps of the tracking phase, from the table's header line (60 s at 3 Hz: 180).
+/// Asserts the vehicle held in the air after a flight at `altitude_m`: in `mode`, never
+/// below a third of that altitude (on the ground it reads ~0 m), its altitude changed by
+/// less than 0.5 m. PX4 SIH's altitude estimate wanders by up to ~0.5 m around the lab's 1.2 m
+/// at the switch to HOLD (1.68 m then 1.38 m in one flight, 0.77 m in a CI flight), so
+/// single samples are not the measure.
+fn assert_held(watch: &AfterStop, mode: Mode, altitude_m: f64) {
+    assert_eq!(watch.mode, Some(mode));
+    assert!(
+        watch.lowest_m() > altitude_m / 3.0,
+        "the vehicle came down to {:.2} m in the hold",
+        watch.lowest_m()
+    );
+    let dz = watch.climb_m();
+    assert!(dz.abs() < 0.5, "altitude changed by {dz:.2} m in the hold");
+}
+
+/// Filter steps of the tracking phase, from the table's header line (3 Hz: 180 in 60 s).
 fn filter_steps(f: &Flight) -> u64 {
     f.stdout
         .split('|')
@@ -318,7 +377,11 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     tokio::task::spawn_blocking(move || params_round_trip("udpin:127.0.0.1:14541", &obl))
         .await
         .unwrap();
-    let f = tokio::task::spawn_blocking(|| fly("udpin:127.0.0.1:14541", 60))
+    // 90 s, not 60: one wall-clock flight's share of frames with the tag spreads widely on
+    // PX4 SIH (its first sighting took 40 s of a 60 s flight once; a 60 s CI flight ended
+    // at 7.3 %, under the bar below, with the code of a 39.1 % one), and a longer flight
+    // averages the search and the losses over more of the target's laps.
+    let f = tokio::task::spawn_blocking(|| fly("udpin:127.0.0.1:14541", 90))
         .await
         .unwrap();
     report("PX4 SIH", &f);
@@ -359,7 +422,7 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     );
     // Takeoff, OFFBOARD, tracking began (its filter steps are the table's).
     assert!(f.stdout.contains("px4 vehicle"), "{}", f.stdout);
-    assert!(filter_steps(&f) >= 150, "{}", f.stdout);
+    assert!(filter_steps(&f) >= 240, "{}", f.stdout);
     assert!(f
         .tlog
         .iter()
@@ -373,7 +436,8 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     // 0.44 m: tracking, loosely). So the bars say that tracking works at all. In view: more
     // often than a drone that never left its start point would see the target (6.7 % of
     // the frames of the lab's target path, 3.9 % from the lab's centre; `sim --closed-loop
-    // --seed 1 --duration 60`'s steps.csv). Estimate: within 0.7 m of the target (0.11-0.45 m
+    // --seed 1 --duration 60`'s steps.csv; over 90 s of the config seed 7's path, which
+    // this flight's target drives: 6.7 % and 3.3 %, the target's centre in the view). Estimate: within 0.7 m of the target (0.11-0.45 m
     // on PX4 SIH over seven flights); an estimate that stayed at the lab's centre would be
     // 1.04 m off on average, the target circling the lab. Until session 30 a miss of a tag
     // cut by the image's edge (PX4 hunts, so the target sits near the edge often) erased
@@ -381,13 +445,16 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     // here. Since the filter and EER count only whole tags: 27.8-37.8 %, 0.11-0.15 m over
     // five flights with the cut (BENCHMARKS.md "Whole tags"); two CI runs in session 31:
     // 33.3 % / 0.10 m and 21.7 % / 0.36 m; session 32's CI run 8.4 % / 0.56 m (its first
-    // sighting late in the flight) and three flights after it 16.8-28.3 %, 0.19-0.47 m.
+    // sighting late in the flight) and three flights after it 16.8-28.3 %, 0.19-0.47 m;
+    // session 33 made the flight 90 s after a 60 s CI flight at 7.3 % / 0.77 m.
     assert!(fov(&f) >= 8.0, "{}", f.stdout);
     let estimation_m = f.summary["estimation_error_m"].as_f64().unwrap();
     assert!(estimation_m <= 0.7, "{}", f.stdout);
-    let (mode, dz) = watch_after_stop("udpin:127.0.0.1:14541", 10.0).await;
-    assert_eq!(mode, Some(Mode::Hold));
-    assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
+    assert_held(
+        &watch_after_stop("udpin:127.0.0.1:14541", 10.0).await,
+        Mode::Hold,
+        1.2,
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -422,9 +489,11 @@ async fn arducopter_flies_the_lab_and_brakes_after_the_flight() {
     // tracking works, not issue 13's 50 % (the mean over several flights is the measure).
     assert!(fov(&f) >= 25.0, "{}", f.stdout);
     // BRAKE holds the altitude with no RC (LOITER would descend to the ground).
-    let (mode, dz) = watch_after_stop("tcpout:127.0.0.1:5772", 10.0).await;
-    assert_eq!(mode, Some(Mode::Brake));
-    assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
+    assert_held(
+        &watch_after_stop("tcpout:127.0.0.1:5772", 10.0).await,
+        Mode::Brake,
+        1.2,
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -477,9 +546,11 @@ async fn arducopter_flies_the_field_world() {
         tag.1
     );
     // After the flight the vehicle holds the field altitude without RC (BRAKE).
-    let (mode, dz) = watch_after_stop("tcpout:127.0.0.1:5782", 10.0).await;
-    assert_eq!(mode, Some(Mode::Brake));
-    assert!(dz.abs() < 0.5, "altitude changed by {dz} m in the hold");
+    assert_held(
+        &watch_after_stop("tcpout:127.0.0.1:5782", 10.0).await,
+        Mode::Brake,
+        45.0,
+    );
 }
 
 /// Frames with the tag and frames, from the results table's `frames with tag` column.
