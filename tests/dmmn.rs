@@ -242,6 +242,15 @@ fn missing_model_and_wrong_shape_are_clear_errors() {
         err.contains("/nonexistent/dmmn.onnx") && err.contains("not found"),
         "{err}"
     );
+    // Where a relative path is looked for: the key's from the config's folder, the
+    // default from the current directory, which the message names.
+    let cwd = std::env::current_dir().unwrap();
+    assert!(
+        err.contains("motion.dmmn_model")
+            && err.contains("config file's folder")
+            && err.contains(&format!("current directory, {}", cwd.display())),
+        "{err}"
+    );
     let bad = root().join("tests/fixtures/dmmn_k5.onnx");
     let err = Dmmn::load(&bad, &c.motion_params())
         .unwrap_err()

@@ -219,8 +219,10 @@ impl Dmmn {
     /// Loads the model and its metadata and checks both against the configuration.
     pub fn load(model_path: &Path, params: &MotionParams) -> Result<Self, MotionError> {
         if !model_path.is_file() {
+            let cwd =
+                std::env::current_dir().map_or_else(|_| "?".into(), |d| d.display().to_string());
             return Err(err(format!(
-                "model file {} not found (set motion.dmmn_model; a relative path is read from the config file's folder)",
+                "model file {} not found (set motion.dmmn_model: a relative path there is read from the config file's folder; without the key, models/dmmn.onnx is read from the current directory, {cwd})",
                 model_path.display()
             )));
         }
