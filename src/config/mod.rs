@@ -202,7 +202,7 @@ pub struct DaemonConfig {
     /// How the in-process mock's vehicle (`mock:px4`, `mock:ardupilot`) answers targets:
     /// `ideal` (exactly, within the agent's speed and acceleration: the paper's simulated
     /// agent) or `sitl` (as the flavour's SITL build measured: PX4 SIH's slow loop that
-    /// wanders by ~0.2 m, ArduCopter's steady one; see BENCHMARKS.md).
+    /// wanders by ~0.3 m, ArduCopter's steady one; see BENCHMARKS.md).
     pub mock_response: MockResponse,
 }
 

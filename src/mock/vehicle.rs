@@ -107,12 +107,17 @@ impl Response {
         spool_up_s: 2.3,
         takeoff_climb_mps: 0.3,
         // Fitted over 21 seeds of the probe (BENCHMARKS "The mock calibrated against
-        // SITL"): 0.35 m and 5 s put the median hover RMS, overshoot, lags and hold drift
-        // inside PX4 SIH's recorded ranges (0.25 m / 2.5 s left the overshoot at 0.19 m,
-        // on the edge of the range's margin).
-        wander_horizontal_m: 0.35,
+        // SITL") and, since session 33, to the lab flight too: 0.35 m and 5 s put the
+        // median hover RMS, overshoot, lags and hold drift inside PX4 SIH's recorded
+        // ranges (0.25 m / 2.5 s left the overshoot at 0.19 m), but the lab's closed loop
+        // on this mock then saw the target half as often as PX4 SIH's lab flights (15.5 %
+        // against 27.6 %; the vehicle 0.69-0.77 m RMS from its setpoint, PX4 SIH's
+        // 0.51-0.64 m): its slow swings carried the view off the target for seconds. 0.3 m
+        // and 1.5 s: the lab 24.4 %, 0.59-0.62 m; the probe's medians within PX4 SIH's
+        // ranges and their margins (BENCHMARKS "The PX4 SIH lab flight: 90 s").
+        wander_horizontal_m: 0.3,
         wander_vertical_m: 0.08,
-        wander_correlation_s: 5.0,
+        wander_correlation_s: 1.5,
         drag_per_s: PX4_SIH_DRAG_PER_S,
     };
 
