@@ -218,7 +218,7 @@ struct BenchArgs {
     #[arg(long)]
     json: Option<PathBuf>,
     /// The learned model to time (its rows are skipped, with the reason, if it does not load).
-    #[arg(long, default_value = "models/dmmn.onnx")]
+    #[arg(long, default_value = infotrack::motion::dmmn::DEFAULT_MODEL_PATH)]
     model: PathBuf,
     /// Time tag detection instead (full frame vs region of interest, 640x480 and
     /// 1280x720); --repetitions is the number of frames per resolution.

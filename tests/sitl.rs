@@ -251,8 +251,11 @@ fn setpoint_rate_hz(f: &Flight) -> f64 {
     (stamps.len() - 1) as f64 / span_s
 }
 
+/// How often the watch after the stop samples the vehicle's altitude.
+const WATCH_SAMPLE: Duration = Duration::from_millis(100);
+
 /// What the vehicle did in the `seconds` after infotrack had gone: its mode, and its
-/// altitude (world up, metres) sampled every 0.1 s.
+/// altitude (world up, metres) sampled every [`WATCH_SAMPLE`].
 struct AfterStop {
     mode: Option<Mode>,
     altitude_m: Vec<f64>,
@@ -261,7 +264,8 @@ struct AfterStop {
 impl AfterStop {
     /// Mean altitude of the first or the last second of the watch.
     fn mean_of_second(&self, last: bool) -> f64 {
-        let n = self.altitude_m.len().min(10);
+        let per_second = (1.0 / WATCH_SAMPLE.as_secs_f64()).round() as usize;
+        let n = self.altitude_m.len().min(per_second);
         let s = if last {
             &self.altitude_m[self.altitude_m.len() - n..]
         } else {
@@ -302,7 +306,7 @@ async fn watch_after_stop(url: &str, seconds: f64) -> AfterStop {
     let end = Instant::now() + Duration::from_secs_f64(seconds);
     while Instant::now() < end {
         altitude_m.extend(alt(&link));
-        tokio::time::sleep(Duration::from_millis(100)).await;
+        tokio::time::sleep(WATCH_SAMPLE).await;
     }
     let watch = AfterStop {
         mode: link.state().mode,
@@ -317,6 +321,17 @@ async fn watch_after_stop(url: &str, seconds: f64) -> AfterStop {
     watch
 }
 
+/// The flight altitude (metres above the ground) of `config/NAME`.
+fn config_altitude_m(name: &str) -> f64 {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(name);
+    infotrack::config::Config::load(&path)
+        .unwrap()
+        .agent
+        .altitude_m
+}
+
 /// Asserts the vehicle held in the air after a flight at `altitude_m`: in `mode`, never
 /// below a third of that altitude (on the ground it reads ~0 m), its altitude changed by
 /// less than 0.5 m. PX4 SIH's altitude estimate wanders by up to ~0.5 m around the lab's 1.2 m
@@ -324,6 +339,7 @@ async fn watch_after_stop(url: &str, seconds: f64) -> AfterStop {
 /// single samples are not the measure.
 fn assert_held(watch: &AfterStop, mode: Mode, altitude_m: f64) {
     assert_eq!(watch.mode, Some(mode));
+    assert!(!watch.altitude_m.is_empty(), "no altitude after the stop");
     assert!(
         watch.lowest_m() > altitude_m / 3.0,
         "the vehicle came down to {:.2} m in the hold",
@@ -437,9 +453,10 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     // often than a drone that never left its start point would see the target (6.7 % of
     // the frames of the lab's target path, 3.9 % from the lab's centre; `sim --closed-loop
     // --seed 1 --duration 60`'s steps.csv; over 90 s of the config seed 7's path, which
-    // this flight's target drives: 6.7 % and 3.3 %, the target's centre in the view). Estimate: within 0.7 m of the target (0.11-0.45 m
-    // on PX4 SIH over seven flights); an estimate that stayed at the lab's centre would be
-    // 1.04 m off on average, the target circling the lab. Until session 30 a miss of a tag
+    // this flight's target drives: 6.7 % and 3.3 %, the target's centre in the view).
+    // Estimate: within 0.7 m of the target (0.11-0.45 m on PX4 SIH over seven flights); an
+    // estimate that stayed at the lab's centre would be 1.04 m off on average, the target
+    // circling the lab. Until session 30 a miss of a tag
     // cut by the image's edge (PX4 hunts, so the target sits near the edge often) erased
     // the true hypothesis: 0.6 % / 0.91 m in one CI flight, 10 % / 0.83 m in one of four
     // here. Since the filter and EER count only whole tags: 27.8-37.8 %, 0.11-0.15 m over
@@ -453,7 +470,7 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     assert_held(
         &watch_after_stop("udpin:127.0.0.1:14541", 10.0).await,
         Mode::Hold,
-        1.2,
+        config_altitude_m("default.toml"),
     );
 }
 
@@ -492,7 +509,7 @@ async fn arducopter_flies_the_lab_and_brakes_after_the_flight() {
     assert_held(
         &watch_after_stop("tcpout:127.0.0.1:5772", 10.0).await,
         Mode::Brake,
-        1.2,
+        config_altitude_m("default.toml"),
     );
 }
 
@@ -549,7 +566,7 @@ async fn arducopter_flies_the_field_world() {
     assert_held(
         &watch_after_stop("tcpout:127.0.0.1:5782", 10.0).await,
         Mode::Brake,
-        45.0,
+        config_altitude_m("outdoor.toml"),
     );
 }
 

@@ -471,7 +471,7 @@ pub struct MotionConfig {
 }
 
 fn default_dmmn_model() -> PathBuf {
-    PathBuf::from("models/dmmn.onnx")
+    PathBuf::from(crate::motion::dmmn::DEFAULT_MODEL_PATH)
 }
 
 /// The constant-velocity Kalman filter, state `[x, y, vx, vy]` in the world ENU frame.

@@ -210,6 +210,10 @@ impl std::fmt::Debug for Dmmn {
     }
 }
 
+/// The learned model a config without `motion.dmmn_model` uses (the lab's), read from the
+/// current directory.
+pub const DEFAULT_MODEL_PATH: &str = "models/dmmn.onnx";
+
 /// `models/dmmn.json` beside `models/dmmn.onnx`.
 pub fn metadata_path(model: &Path) -> PathBuf {
     model.with_extension("json")
@@ -222,7 +226,7 @@ impl Dmmn {
             let cwd =
                 std::env::current_dir().map_or_else(|_| "?".into(), |d| d.display().to_string());
             return Err(err(format!(
-                "model file {} not found (set motion.dmmn_model: a relative path there is read from the config file's folder; without the key, models/dmmn.onnx is read from the current directory, {cwd})",
+                "model file {} not found (set motion.dmmn_model: a relative path there is read from the config file's folder; without the key, {DEFAULT_MODEL_PATH} is read from the current directory, {cwd})",
                 model_path.display()
             )));
         }
