@@ -184,7 +184,8 @@ pub struct DaemonConfig {
     /// The target counts as lost after this long without a measurement, s; the filter's
     /// belief is then spread again along the routes the target can have driven since it
     /// was last seen, less those the camera has looked at since (before it is first seen,
-    /// with an `[acquisition]` cue: the routes from the cue's roads since the start).
+    /// with an `[acquisition]` cue: the routes from the cue's roads since the start), and
+    /// again after each further such period while it stays unseen (half the belief kept).
     pub target_lost_after_s: f64,
     /// What to do while the target is lost: `eer` (keep the EER search), `lawn` (lawnmower
     /// sweep), `hold` (stay where the vehicle is).

@@ -49,9 +49,10 @@ impl Tracker {
         }
     }
 
-    /// After `respread_after_s` without a measurement, once per such spell: the particles
-    /// go back on the roads the target can have driven to since it was last seen, each on
-    /// one route forward from the last measurement and weighted by the empty frames since
+    /// After `respread_after_s` without a measurement, and again at the times
+    /// [`respread_due_s`] gives while the target stays unseen: the particles go back on
+    /// the roads the target can have driven to since it was last seen, each on one route
+    /// forward from the last measurement and weighted by the empty frames since
     /// ([`Self::respread_along_routes`]); never seen, each on a route from a point on the
     /// cue's roads, weighted by every empty frame since the start (before session 20 the
     /// cue's roads carried forward, which gave the roads the drone had flown along empty
@@ -61,15 +62,35 @@ impl Tracker {
     /// alone (before session 19) gave the branches the camera had already ruled out their
     /// share back (field-grid: the belief that had found the car turning north was split
     /// even again at the re-spread, and the drone flew east after it).
+    ///
+    /// Once per spell (before session 36) a long search lost the hypotheses it needed: the
+    /// empty views killed every particle but those hidden under an occlusion, resampling
+    /// multiplied those, and the belief sat under a warehouse for 150 s while the car, which
+    /// had turned back there, drove away (outdoor seed 7). A repeated re-spread is drawn
+    /// along routes only, and keeps [`RESPREAD_KEEP_SHARE`] of the filter's belief
+    /// ([`ParticleFilter::keep_part_of`]); BENCHMARKS.md "Field scale, part 33".
     pub(super) fn respread_if_long_unseen(&mut self, t_s: f64) {
         let Some(after) = self.params.respread_after_s else {
             return;
         };
-        if self.respread_done || t_s - self.last_seen_s <= after {
+        if t_s - self.last_seen_s <= respread_due_s(after, self.respreads_in_spell) {
             return;
         }
-        self.respread_done = true;
+        let repeat = self.respreads_in_spell > 0;
+        self.respreads_in_spell += 1;
+        let before = match (&self.estimator, repeat) {
+            (Estimator::Particle { pf, .. }, true) => Some(pf.clone()),
+            _ => None,
+        };
         if self.respread_along_routes(t_s) {
+            if let (Some(before), Estimator::Particle { pf, .. }) = (before, &mut self.estimator) {
+                pf.keep_part_of(&before, RESPREAD_KEEP_SHARE, &mut self.rng_filter);
+            }
+            return;
+        }
+        if repeat {
+            // Without routes, a repeat would only spread the belief over the roads again
+            // and give back what the camera has ruled out.
             return;
         }
         // No route to draw (no cue, or no road): the roads around where it can be.
@@ -153,4 +174,11 @@ impl Tracker {
             }
         }
     }
+}
+
+/// How long after the last measurement the re-spread that follows `done` earlier ones in
+/// the same spell is due, s: `after` for the first, then every `after` again while the
+/// target stays unseen.
+pub(super) fn respread_due_s(after_s: f64, done: u32) -> f64 {
+    after_s * f64::from(done + 1)
 }

@@ -45,6 +45,12 @@ const MEASURED_TRACK_S: f64 = 3.0;
 /// [`MEASURED_TRACK_S`]) is remembered, s.
 const CRUISE_WINDOW_S: f64 = 20.0;
 
+/// The share of the belief a repeated re-spread keeps on the filter's particles (the rest
+/// goes on new routes, [`ParticleFilter::keep_part_of`]). Half, the one value measured
+/// (BENCHMARKS.md "Field scale, part 33"): all routes lost resolution where the filter's
+/// belief was right (field-eight -2.9 points).
+const RESPREAD_KEEP_SHARE: f64 = 0.5;
+
 /// The most empty frames a re-spread weighs its routes with (at 3 Hz, 22 minutes); older
 /// ones are let go, which only forgets what they ruled out.
 const MAX_EMPTY_FRAMES: usize = 4096;
@@ -188,8 +194,9 @@ pub struct Tracker {
     command: Option<Command>,
     entropy: f64,
     last_eer: f64,
-    /// The belief was spread again in the current spell without measurements.
-    respread_done: bool,
+    /// How many times the belief was spread again in the current spell without
+    /// measurements.
+    respreads_in_spell: u32,
     /// The estimate's speed at the last step with a measurement, m/s.
     last_seen_speed_mps: f64,
     /// The speeds measured over the last [`CRUISE_WINDOW_S`] (time, m/s), oldest first.
@@ -247,7 +254,7 @@ impl Tracker {
             command: None,
             entropy: f64::NAN,
             last_eer: f64::NAN,
-            respread_done: false,
+            respreads_in_spell: 0,
             last_seen_speed_mps: 0.0,
             recent_speeds: std::collections::VecDeque::new(),
             last_seen_velocity_enu: Enu2::zeros(),
@@ -367,7 +374,7 @@ impl Tracker {
         }
         if z.is_some() {
             self.last_seen_s = t_s;
-            self.respread_done = false;
+            self.respreads_in_spell = 0;
             self.last_seen_velocity_enu = self.measured_velocity();
             self.last_seen_speed_mps = self.last_seen_velocity_enu.norm();
             self.recent_speeds

@@ -135,7 +135,7 @@ impl Tracker {
         let over_target_velocity_enu = self.confident_velocity();
         let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
         // Searching: EER then keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27").
-        let searching = self.respread_done
+        let searching = self.respreads_in_spell > 0
             || is_searching(self.last_measurement, t_s, self.local_for_s(horizon_s));
         let Estimator::Particle { pf, model } = &mut self.estimator else {
             // Refused at construction by check_combination.

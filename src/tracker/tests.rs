@@ -497,3 +497,32 @@ fn the_belief_stays_local_until_the_target_could_have_crossed_the_view() {
     t.last_seen_speed_mps = 0.0;
     assert!(t.local_for_s(2.0) > 1e6);
 }
+
+#[test]
+fn the_belief_is_spread_again_every_period_while_the_target_stays_unseen() {
+    let c = field_grid();
+    let dt = 1.0 / c.timing.filter_hz;
+    let after = c.daemon.target_lost_after_s;
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    let mut t_s = seen_driving_east(&mut t, dt, 12.0, 12.0);
+    let lost_s = t_s;
+    assert_eq!(t.respreads_in_spell, 0);
+    // The camera off every road: nothing is seen, nothing ruled out.
+    let elsewhere = Enu2::new(1100.0, -150.0);
+    for periods in 1..=3u32 {
+        while t_s < lost_s + f64::from(periods) * after + 0.5 {
+            t_s += dt;
+            frame(&mut t, t_s, elsewhere, None);
+        }
+        assert_eq!(t.respreads_in_spell, periods, "at {t_s} s");
+        let pf = t.estimator().particle_filter().unwrap();
+        assert!((pf.weights().iter().sum::<f64>() - 1.0).abs() < 1e-9);
+    }
+    // Seen again: a new spell.
+    t_s += dt;
+    let car = Enu2::new(900.0, 0.0);
+    frame(&mut t, t_s, car, Some(car));
+    assert_eq!(t.respreads_in_spell, 0);
+    assert_eq!(belief::respread_due_s(after, 0), after);
+    assert_eq!(belief::respread_due_s(after, 2), 3.0 * after);
+}

@@ -146,6 +146,56 @@ impl ParticleFilter {
         true
     }
 
+    /// Gives `share` of the belief back to `before` (this filter as it was before a
+    /// re-spread): a random `share` of the particles take their tracks back from `before`,
+    /// and the weights become `share` x `before`'s weights over those plus (1 - share) x the
+    /// re-spread's weights over the rest, each group normalised on its own. A defensive
+    /// mixture of two approximations of one posterior: the re-spread puts back hypotheses
+    /// a long search lost to resampling, the kept share keeps the resolution the filter had
+    /// reached where the camera has not looked. False, with nothing changed, when the
+    /// filters differ in size or track length, `share` is not inside (0, 1), or either group
+    /// is empty or carries no weight.
+    pub fn keep_part_of<R: Rng + ?Sized>(
+        &mut self,
+        before: &ParticleFilter,
+        share: f64,
+        rng: &mut R,
+    ) -> bool {
+        let n = self.weights.len();
+        if before.weights.len() != n
+            || before.histories.k_in() != self.histories.k_in()
+            || !(share > 0.0 && share < 1.0)
+        {
+            return false;
+        }
+        let kept: Vec<bool> = (0..n).map(|_| rng.gen_bool(share)).collect();
+        let group_sum = |w: &[f64], want: bool| -> f64 {
+            w.iter()
+                .zip(&kept)
+                .filter(|(_, k)| **k == want)
+                .map(|(w, _)| *w)
+                .sum()
+        };
+        let (old_sum, new_sum) = (
+            group_sum(&before.weights, true),
+            group_sum(&self.weights, false),
+        );
+        if !(old_sum > 0.0 && new_sum > 0.0 && old_sum.is_finite() && new_sum.is_finite()) {
+            return false;
+        }
+        for (i, keep) in kept.iter().enumerate() {
+            if *keep {
+                self.histories
+                    .track_mut(i)
+                    .copy_from_slice(before.histories.track(i));
+                self.weights[i] = share * before.weights[i] / old_sum;
+            } else {
+                self.weights[i] *= (1.0 - share) / new_sum;
+            }
+        }
+        true
+    }
+
     /// Re-routes in place every particle within a step of a junction: a constant-velocity
     /// particle drives straight on through a junction, off the road, where the road
     /// constraint kills it; so each one whose next step leaves its road is put on one of the

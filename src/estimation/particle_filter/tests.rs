@@ -547,6 +547,53 @@ fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
     assert!((pf.weights().iter().sum::<f64>() - 1.0).abs() < 1e-9);
 }
 
+#[test]
+fn a_kept_share_gives_the_belief_before_the_re_spread_its_weight_back() {
+    let c = field_grid();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(9);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    // Before: the whole belief on the northbound branch (its weight there 1).
+    let north = RouteStart::At(Enu2::new(500.0, 60.0), Some(Enu2::new(0.0, 12.0)));
+    assert!(pf.spread_along_routes(&world, north, 10.0..=10.0, 1.0, &[], &mut rng));
+    let before = pf.clone();
+    assert!(branch_weights(&before).0 > 0.999);
+    // The re-spread: every route east, past the fork.
+    let east = RouteStart::At(Enu2::new(560.0, 0.0), Some(Enu2::new(12.0, 0.0)));
+    assert!(pf.spread_along_routes(&world, east, 10.0..=10.0, 1.0, &[], &mut rng));
+    assert!(branch_weights(&pf).1 > 0.999);
+    // Refused, nothing changed: a share outside (0, 1), or filters of different sizes.
+    let respread = pf.weights().to_vec();
+    for share in [0.0, 1.0, f64::NAN, -0.5] {
+        assert!(!pf.keep_part_of(&before, share, &mut rng), "{share}");
+    }
+    let mut other = ParticleFilter::new(
+        FilterParams {
+            particles: 10,
+            ..c.filter_params()
+        },
+        c.workspace_enu,
+        &mut rng,
+    );
+    assert!(!other.keep_part_of(&before, 0.5, &mut rng));
+    assert_eq!(pf.weights(), &respread[..]);
+    // Kept: a share of the particles back on their old tracks with that share of the weight.
+    for share in [0.3, 0.5] {
+        let mut mixed = pf.clone();
+        assert!(mixed.keep_part_of(&before, share, &mut rng));
+        let (n, e) = branch_weights(&mixed);
+        assert!(
+            (n - share).abs() < 1e-9 && (e - (1.0 - share)).abs() < 1e-9,
+            "{n} {e}"
+        );
+        let back = (0..mixed.weights().len())
+            .filter(|&i| mixed.histories().track(i) == before.histories().track(i))
+            .count() as f64;
+        let n_all = mixed.weights().len() as f64;
+        assert!((back / n_all - share).abs() < 0.1, "{back} of {n_all}");
+    }
+}
+
 /// The weighted share of the particles whose last step is slower than `mps`.
 fn weight_slower_than(pf: &ParticleFilter, mps: f64, dt_s: f64) -> f64 {
     let h = pf.histories();
