@@ -84,6 +84,8 @@ impl Tracker {
         };
         if self.respread_along_routes(t_s) {
             if let (Some(before), Estimator::Particle { pf, .. }) = (before, &mut self.estimator) {
+                // Refused (a group without weight), the routes stand alone, as a first
+                // re-spread's do.
                 pf.keep_part_of(&before, RESPREAD_KEEP_SHARE, &mut self.rng_filter);
             }
             return;

@@ -516,12 +516,18 @@ fn branch_weights(pf: &ParticleFilter) -> (f64, f64) {
     north_east
 }
 
-#[test]
-fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
+/// field-grid's config and world, and a filter over its workspace drawn with `seed`.
+fn field_grid_filter(seed: u64) -> (Config, World, ParticleFilter, CoreRng) {
     let c = field_grid();
     let world = c.world();
-    let mut rng = CoreRng::seed_from_u64(8);
-    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let mut rng = CoreRng::seed_from_u64(seed);
+    let pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    (c, world, pf, rng)
+}
+
+#[test]
+fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
+    let (c, world, mut pf, mut rng) = field_grid_filter(8);
     let start = RouteStart::At(Enu2::new(468.0, 0.0), Some(Enu2::new(12.0, 0.0)));
     // Ten seconds on at 8.4-15.6 m/s: 84-156 m of road, through the fork either way.
     assert!(pf.spread_along_routes(&world, start, 8.4..=15.6, 10.0, &[], &mut rng));
@@ -549,10 +555,7 @@ fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
 
 #[test]
 fn a_kept_share_gives_the_belief_before_the_re_spread_its_weight_back() {
-    let c = field_grid();
-    let world = c.world();
-    let mut rng = CoreRng::seed_from_u64(9);
-    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let (c, world, mut pf, mut rng) = field_grid_filter(9);
     // Before: the whole belief on the northbound branch (its weight there 1).
     let north = RouteStart::At(Enu2::new(500.0, 60.0), Some(Enu2::new(0.0, 12.0)));
     assert!(pf.spread_along_routes(&world, north, 10.0..=10.0, 1.0, &[], &mut rng));
