@@ -1,6 +1,6 @@
 //! `infotrack sim` and `infotrack bench` as a user runs them: real process, real files.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn infotrack() -> Command {
@@ -16,14 +16,29 @@ fn num(v: &serde_json::Value, path: &[&str]) -> f64 {
         .unwrap_or_else(|| panic!("{path:?} is not a number in {v}"))
 }
 
+/// Runs `infotrack sim` with `args` plus `--json DIR/r.json --out DIR/out`; returns the
+/// process output and the two paths.
+fn sim_to_files(dir: &Path, args: &[&str]) -> (std::process::Output, PathBuf, PathBuf) {
+    let json = dir.join("r.json");
+    let out = dir.join("out");
+    let o = infotrack()
+        .arg("sim")
+        .args(args)
+        .arg("--json")
+        .arg(&json)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    (o, json, out)
+}
+
 #[test]
 fn sim_writes_the_json_schema_the_table_and_the_plots() {
     let dir = tempfile::tempdir().unwrap();
-    let json = dir.path().join("r.json");
-    let out = dir.path().join("out");
-    let o = infotrack()
-        .args([
-            "sim",
+    let (o, json, out) = sim_to_files(
+        dir.path(),
+        &[
             "--runs",
             "2",
             "--duration",
@@ -31,14 +46,12 @@ fn sim_writes_the_json_schema_the_table_and_the_plots() {
             "--quiet",
             "--seed",
             "3",
-        ])
-        .args(["--guidance", "eer,pfwm,lawn,kf,truth", "--motion", "cv,kf"])
-        .arg("--json")
-        .arg(&json)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+            "--guidance",
+            "eer,pfwm,lawn,kf,truth",
+            "--motion",
+            "cv,kf",
+        ],
+    );
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(
         o.status.success(),
@@ -95,6 +108,79 @@ fn sim_writes_the_json_schema_the_table_and_the_plots() {
         let bytes = std::fs::read(out.join(png)).unwrap();
         assert_eq!(&bytes[1..4], b"PNG", "{png}");
     }
+}
+
+/// `scripts/frame-causes.py` reads what `sim --out` writes: each method's "measured" share
+/// is the sim's %FOV (equal-length runs: the pooled share is the mean of the runs'), and
+/// the causes account for every step.
+#[test]
+fn frame_causes_reads_the_steps_sim_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, json, out) = sim_to_files(
+        dir.path(),
+        &[
+            "--runs",
+            "3",
+            "--duration",
+            "30",
+            "--quiet",
+            "--seed",
+            "4",
+            "--guidance",
+            "eer,lawn",
+            "--motion",
+            "cv",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/frame-causes.py");
+    let o = Command::new("python3")
+        .arg(&script)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let table = String::from_utf8(o.stdout).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for r in v["results"].as_array().unwrap() {
+        let method = format!(
+            "{}_{}",
+            r["guidance"].as_str().unwrap(),
+            r["motion"].as_str().unwrap()
+        );
+        let row = table
+            .lines()
+            .find(|l| l.split(" | ").next().is_some_and(|d| d.ends_with(&method)))
+            .unwrap_or_else(|| panic!("no row for {method} in\n{table}"));
+        let cells: Vec<f64> = row
+            .split(" | ")
+            .skip(1)
+            .map(|c| c.parse().unwrap())
+            .collect();
+        assert_eq!(cells.len(), 7, "{row}");
+        let fov = num(r, &["fov_percent", "mean"]);
+        assert!(
+            (cells[0] - fov).abs() <= 0.051,
+            "{method}: measured {} against %FOV {fov}",
+            cells[0]
+        );
+        let total: f64 = cells.iter().sum();
+        assert!(
+            (total - 100.0).abs() <= 0.4,
+            "{method}: causes sum to {total}"
+        );
+    }
+    // A directory without runs is named in the error.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let o = Command::new("python3")
+        .arg(&script)
+        .arg(&empty)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no run*.csv"));
 }
 
 #[test]
