@@ -93,8 +93,10 @@ pub trait MotionModel: Send {
     fn required_history_len(&self) -> Option<usize>;
 
     /// Whether the model knows where the roads go (a learned model trained on this world
-    /// turns where the roads turn); the tracker injects road hypotheses only for models
-    /// that do not.
+    /// turns where the roads turn); the tracker injects road hypotheses before the first
+    /// sighting, and the filter weighs a track's heading against its road, only for models
+    /// that do not. Re-routing at junctions applies to every model: one prediction per
+    /// track cannot split a belief at a fork.
     fn knows_the_roads(&self) -> bool {
         false
     }

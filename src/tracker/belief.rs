@@ -145,21 +145,25 @@ impl Tracker {
         }
     }
 
-    /// At each step without a measurement, for a motion model that does not know the roads
-    /// (constant velocity, which drives straight on through a junction): once the target has
-    /// been seen, the particles at a junction are re-routed onto the roads they can take
+    /// At each step without a measurement: once the target has been seen, the particles at
+    /// a junction are re-routed onto the roads they can take, whatever the motion model
     /// (`ParticleFilter::reroute_at_junctions`: the belief itself, so what the agent has
-    /// ruled out stays ruled out); before that, a share of the particles
-    /// (`injection_share`) is replaced by hypotheses on the roads around the belief (within
-    /// two standard deviations of its mean plus a second at the largest speed). A share of
-    /// 0 turns both off.
+    /// ruled out stays ruled out). A learned model that knows the roads still predicts one
+    /// next position per track: at a fork it sends every track the same way (the outdoor
+    /// DMMN: all of them on east at node 1, the car north), and only the re-routing splits
+    /// the belief over the branches by their probabilities (BENCHMARKS.md "Field scale,
+    /// part 36"). Before the first sighting, for a model that does not know the roads
+    /// (constant velocity), a share of the particles (`injection_share`) is replaced by
+    /// hypotheses on the roads around the belief (within two standard deviations of its
+    /// mean plus a second at the largest speed). A share of 0 turns both off.
     pub(super) fn inject_where_it_can_be(&mut self) {
         let share = self.params.injection_share;
         let knows_roads = match &self.estimator {
             Estimator::Particle { model, .. } => model.knows_the_roads(),
             Estimator::Kalman(_) => true,
         };
-        if share <= 0.0 || knows_roads {
+        let seen = self.last_measurement.is_some();
+        if share <= 0.0 || (knows_roads && !seen) {
             return;
         }
         let v_max = self.params.filter.init_speed_max_mps;
@@ -167,7 +171,6 @@ impl Tracker {
         let region = Some((self.estimator.mean(), 2.0 * sd + v_max));
         let speeds = self.hypothesis_speeds();
         let count = (share * self.params.filter.particles as f64).round() as usize;
-        let seen = self.last_measurement.is_some();
         if let Estimator::Particle { pf, .. } = &mut self.estimator {
             if seen {
                 pf.reroute_at_junctions(&self.world, &mut self.rng_filter);

@@ -148,13 +148,10 @@ impl Tracker {
         self.planner.use_intercepts(self.last_measurement.is_some());
         self.planner.set_searching(searching);
         // EER plans with the prediction the filter makes: where the filter re-routes its
-        // constant-velocity belief at junctions, so does the rollout. Straight on, the
-        // predicted tracks ran off the road past every corner and EER sent the drone
-        // there: it overshot the car's turns and chased from behind (BENCHMARKS.md "Field
-        // scale, part 24").
-        let reroutes = self.last_measurement.is_some()
-            && self.params.injection_share > 0.0
-            && !model.knows_the_roads();
+        // belief at junctions, so does the rollout. Straight on, the predicted tracks ran
+        // off the road past every corner and EER sent the drone there: it overshot the
+        // car's turns and chased from behind (BENCHMARKS.md "Field scale, part 24").
+        let reroutes = self.last_measurement.is_some() && self.params.injection_share > 0.0;
         let on_road_m = 0.5 * self.params.filter.road_sigma_m.unwrap_or(0.0);
         self.planner.reroute_rollout(reroutes.then_some(on_road_m));
         let d = self.planner.plan(

@@ -526,3 +526,60 @@ fn the_belief_is_spread_again_every_period_while_the_target_stays_unseen() {
     assert_eq!(belief::respread_due_s(after, 0), after);
     assert_eq!(belief::respread_due_s(after, 2), 3.0 * after);
 }
+
+/// `config/outdoor.toml` with its own DMMN (`models/outdoor/dmmn.onnx`), its filter drawn
+/// from stream `seed`.
+fn outdoor_dmmn_tracker(seed: u64) -> (Config, Tracker) {
+    let c =
+        Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
+            .unwrap();
+    let t = Tracker::new(
+        c.tracker_params(GuidanceKind::Eer, false),
+        c.world(),
+        &EstimatorKind::parse("dmmn").unwrap(),
+        stream_rng(seed, 0, Stream::Filter, 0),
+        stream_rng(seed, 0, Stream::Guidance, 0),
+    )
+    .unwrap();
+    (c, t)
+}
+
+/// The share of the belief on outdoor's north road out of node 1 (600, 0) after the car,
+/// seen driving east at 10 m/s up to (560, 0) at 14 s, has been unseen for 7 s (the camera
+/// off every road, before the re-spread): it is then ~30 m past the junction, on east
+/// (p 0.6) or north (p 0.4).
+fn north_share_past_node_1(seed: u64) -> f64 {
+    let (c, mut t) = outdoor_dmmn_tracker(seed);
+    let dt = 1.0 / c.timing.filter_hz;
+    let mut t_s = 0.0;
+    while t_s < 14.0 - 1e-9 {
+        t_s += dt;
+        let car = Enu2::new(420.0 + 10.0 * t_s, 0.0);
+        frame(&mut t, t_s, car, Some(car));
+    }
+    let elsewhere = Enu2::new(300.0, 400.0);
+    while t_s < 21.0 - 1e-9 {
+        t_s += dt;
+        frame(&mut t, t_s, elsewhere, None);
+    }
+    assert_eq!(t.respreads_in_spell, 0);
+    let pf = t.estimator().particle_filter().unwrap();
+    pf.particles()
+        .iter()
+        .zip(pf.weights())
+        .filter(|(p, _)| p.y > 15.0 && (p.x - 600.0).abs() < 10.0)
+        .map(|(_, w)| w)
+        .sum()
+}
+
+#[test]
+fn a_belief_predicted_by_a_model_that_knows_the_roads_is_re_routed_at_a_fork() {
+    // The DMMN predicts one next position per track and, left alone, sends nearly every
+    // track east: over these four filter streams 0.028 of the belief north (0.002-0.059).
+    // Re-routed at the fork: 0.066 (0.044-0.079). Still well short of the graph's 0.4: the
+    // re-routed track's straight history runs back off the road, which the DMMN never saw
+    // in training (BENCHMARKS.md "Field scale, part 36").
+    let shares: Vec<f64> = (1..=4).map(north_share_past_node_1).collect();
+    let mean = shares.iter().sum::<f64>() / shares.len() as f64;
+    assert!(mean > 0.045, "north shares {shares:?}");
+}
