@@ -158,25 +158,30 @@ impl Tracker {
     /// mean plus a second at the largest speed). A share of 0 turns both off.
     pub(super) fn inject_where_it_can_be(&mut self) {
         let share = self.params.injection_share;
+        if share <= 0.0 {
+            return;
+        }
+        if self.last_measurement.is_some() {
+            if let Estimator::Particle { pf, .. } = &mut self.estimator {
+                pf.reroute_at_junctions(&self.world, &mut self.rng_filter);
+            }
+            return;
+        }
         let knows_roads = match &self.estimator {
             Estimator::Particle { model, .. } => model.knows_the_roads(),
             Estimator::Kalman(_) => true,
         };
-        let seen = self.last_measurement.is_some();
-        if share <= 0.0 || (knows_roads && !seen) {
+        if knows_roads {
             return;
         }
+        // Only what the pre-sighting injection needs, computed only when it runs.
         let v_max = self.params.filter.init_speed_max_mps;
         let sd = self.estimator.largest_sd_m();
         let region = Some((self.estimator.mean(), 2.0 * sd + v_max));
         let speeds = self.hypothesis_speeds();
         let count = (share * self.params.filter.particles as f64).round() as usize;
         if let Estimator::Particle { pf, .. } = &mut self.estimator {
-            if seen {
-                pf.reroute_at_junctions(&self.world, &mut self.rng_filter);
-            } else {
-                pf.inject_on_roads(&self.world, region, count, speeds, &mut self.rng_filter);
-            }
+            pf.inject_on_roads(&self.world, region, count, speeds, &mut self.rng_filter);
         }
     }
 }

@@ -26,14 +26,32 @@ impl Sensor for Scripted {
 }
 
 fn tracker(c: &Config, guidance: GuidanceKind, failsafe: bool) -> Tracker {
+    tracker_with(c, guidance, failsafe, "cv", 1)
+}
+
+/// A tracker on `c` with the motion model named `motion`, its random streams drawn from
+/// `seed`.
+fn tracker_with(
+    c: &Config,
+    guidance: GuidanceKind,
+    failsafe: bool,
+    motion: &str,
+    seed: u64,
+) -> Tracker {
     Tracker::new(
         c.tracker_params(guidance, failsafe),
         c.world(),
-        &EstimatorKind::parse("cv").unwrap(),
-        stream_rng(1, 0, Stream::Filter, 0),
-        stream_rng(1, 0, Stream::Guidance, 0),
+        &EstimatorKind::parse(motion).unwrap(),
+        stream_rng(seed, 0, Stream::Filter, 0),
+        stream_rng(seed, 0, Stream::Guidance, 0),
     )
     .unwrap()
+}
+
+/// `config/outdoor.toml` as shipped.
+fn outdoor_config() -> Config {
+    Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
+        .unwrap()
 }
 
 fn input(v: Enu2) -> TickInput {
@@ -200,9 +218,7 @@ fn eer_with_a_kalman_estimator_is_refused_with_a_reason() {
 
 #[test]
 fn the_prior_is_on_the_roads_within_the_cue() {
-    let mut c =
-        Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
-            .unwrap();
+    let mut c = outdoor_config();
     let (cue, r) = (Enu2::new(600.0, 200.0), 120.0);
     c.acquisition = Some(crate::config::AcquisitionConfig {
         cue_enu_m: [cue.x, cue.y],
@@ -245,9 +261,7 @@ fn the_prior_is_on_the_roads_within_the_cue() {
 fn eer_over_a_concentrated_belief_moves_with_the_target() {
     // A car driving east at 10 m/s, measured at every step: the setpoint carries its
     // velocity, so a vehicle following it does not trail by speed / gain.
-    let c =
-        Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
-            .unwrap();
+    let c = outdoor_config();
     let mut t = tracker(&c, GuidanceKind::Pfwm, false);
     let mut last = None;
     let mut x = 20.0;
@@ -530,17 +544,8 @@ fn the_belief_is_spread_again_every_period_while_the_target_stays_unseen() {
 /// `config/outdoor.toml` with its own DMMN (`models/outdoor/dmmn.onnx`), its filter drawn
 /// from stream `seed`.
 fn outdoor_dmmn_tracker(seed: u64) -> (Config, Tracker) {
-    let c =
-        Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
-            .unwrap();
-    let t = Tracker::new(
-        c.tracker_params(GuidanceKind::Eer, false),
-        c.world(),
-        &EstimatorKind::parse("dmmn").unwrap(),
-        stream_rng(seed, 0, Stream::Filter, 0),
-        stream_rng(seed, 0, Stream::Guidance, 0),
-    )
-    .unwrap();
+    let c = outdoor_config();
+    let t = tracker_with(&c, GuidanceKind::Eer, false, "dmmn", seed);
     (c, t)
 }
 
