@@ -48,10 +48,19 @@ fn tracker_with(
     .unwrap()
 }
 
+/// `config/NAME` as shipped.
+fn shipped_config(name: &str) -> Config {
+    Config::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("config")
+            .join(name),
+    )
+    .unwrap()
+}
+
 /// `config/outdoor.toml` as shipped.
 fn outdoor_config() -> Config {
-    Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
-        .unwrap()
+    shipped_config("outdoor.toml")
 }
 
 fn input(v: Enu2) -> TickInput {
@@ -357,8 +366,7 @@ fn with_a_disc_of_reach_a_waypoint_beyond_the_rim_is_approached_at_top_speed() {
 /// `config/field-grid.toml`, whose car drives east along y = 0 into a fork at (500, 0)
 /// under an overpass: on east, or north to (500, 500).
 fn field_grid() -> Config {
-    Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/field-grid.toml"))
-        .unwrap()
+    shipped_config("field-grid.toml")
 }
 
 /// One filter step at `t_s` of a frame taken from `camera`, with or without the target.
