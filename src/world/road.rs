@@ -279,12 +279,14 @@ impl RoadNetwork {
     /// The edge (from-node, to-node indices) nearest to `p` and the distance along it of
     /// `p`'s projection. With a `heading`, the edge is chosen among the near ones (see
     /// [`NEAR_EDGE_SHARE`]) by how well it agrees with the heading: edges heading against
-    /// it count only when no other is near.
+    /// it count only when no other is near; and edges that run alongside `p` (its
+    /// projection falls inside them) and go its way ([`ALONG_HEADING_COS`]) come before
+    /// edges it lies beyond an end of.
     fn nearest_edge(&self, p: &Enu2, heading: Option<Enu2>) -> Option<(usize, usize, f64)> {
         let heading = heading.filter(|h| h.norm() > 1e-9).map(|h| h.normalize());
         let nearest = self
             .edge_projections(p)
-            .map(|(dist, _, _)| dist)
+            .map(|e| e.distance_m)
             .fold(f64::INFINITY, f64::min);
         // The heading chooses only among the edges about as near as the nearest: with it
         // weighed against any distance (before session 25, a 90-degree difference as 1 km),
@@ -292,27 +294,40 @@ impl RoadNetwork {
         // on the start of an east-going road 390 m back, and a track just past a gentle bend
         // back on the road before it, 58 m behind (BENCHMARKS "Field scale, part 23").
         let near = 2.0 * nearest + self.near_tolerance_m;
+        // A point beyond an edge's end is not on it: its projection is the end node. Chosen
+        // by the heading alone, a car 29 m past a junction and 8 m beside its new road (it
+        // had cut the corner), heading 23 degrees off that road, was put back on the road it
+        // came in on, at the junction, and re-routed from there: the whole belief jumped 29 m
+        // back, its share down the other branch survived the camera while the car drove out
+        // of view, and the drone followed it (field-ring seed 1, BENCHMARKS "Field scale,
+        // part 38").
+        let goes_its_way = |e: &EdgeProjection| {
+            heading
+                .is_some_and(|h| e.overshoot_m <= 0.0 && e.direction.dot(&h) >= ALONG_HEADING_COS)
+        };
+        let alongside = self
+            .edge_projections(p)
+            .any(|e| e.distance_m <= near && goes_its_way(&e));
         let mut best: Option<(f64, (usize, usize, f64))> = None;
-        for (dist, dir, edge) in self.edge_projections(p).filter(|e| e.0 <= near) {
+        for e in self.edge_projections(p) {
+            if e.distance_m > near || (alongside && !goes_its_way(&e)) {
+                continue;
+            }
             let cost = match heading {
                 // Across or against the heading: as if up to 2 km farther away (a 5-degree
                 // difference costs 4 m, a crossing road 1 km).
-                Some(h) => dist + (1.0 - dir.dot(&h)) * 1e3,
-                None => dist,
+                Some(h) => e.distance_m + (1.0 - e.direction.dot(&h)) * 1e3,
+                None => e.distance_m,
             };
             if best.map_or(true, |(c, _)| cost < c) {
-                best = Some((cost, edge));
+                best = Some((cost, e.edge));
             }
         }
         best.map(|(_, e)| e)
     }
 
-    /// Every edge of positive length with `p`'s distance to it, its unit direction and the
-    /// edge (from-node, to-node indices, distance along it of `p`'s projection).
-    fn edge_projections<'a>(
-        &'a self,
-        p: &'a Enu2,
-    ) -> impl Iterator<Item = (f64, Enu2, (usize, usize, f64))> + 'a {
+    /// Every edge of positive length with `p`'s projection on it.
+    fn edge_projections<'a>(&'a self, p: &'a Enu2) -> impl Iterator<Item = EdgeProjection> + 'a {
         self.nodes.iter().enumerate().flat_map(move |(u, node)| {
             node.next.iter().filter_map(move |&(v, _)| {
                 let a = node.position_enu;
@@ -321,9 +336,15 @@ impl RoadNetwork {
                 if len <= 1e-9 {
                     return None;
                 }
-                let dir = d / len;
-                let s = (p - a).dot(&dir).clamp(0.0, len);
-                Some(((a + dir * s - p).norm(), dir, (u, v, s)))
+                let direction = d / len;
+                let along = (p - a).dot(&direction);
+                let s = along.clamp(0.0, len);
+                Some(EdgeProjection {
+                    distance_m: (a + direction * s - p).norm(),
+                    direction,
+                    overshoot_m: (along - len).max(-along).max(0.0),
+                    edge: (u, v, s),
+                })
             })
         })
     }
@@ -389,6 +410,19 @@ impl RoadNetwork {
             })
             .collect()
     }
+}
+
+/// A point's projection on one directed edge.
+#[derive(Debug, Clone, Copy)]
+struct EdgeProjection {
+    /// Distance from the point to the edge, m.
+    distance_m: f64,
+    /// The edge's unit direction, world ENU.
+    direction: Enu2,
+    /// How far the point lies beyond either end of the edge, along it, m (0: alongside).
+    overshoot_m: f64,
+    /// From-node and to-node indices and the distance along the edge of the projection.
+    edge: (usize, usize, f64),
 }
 
 /// Distance from `p` to the segment a-b, m.

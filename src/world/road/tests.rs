@@ -336,3 +336,48 @@ fn a_route_is_driven_along_the_allowed_ways_and_takes_each_turn_by_its_probabili
     let share = east as f64 / n as f64;
     assert!((share - 0.5).abs() < 0.03, "{share}");
 }
+
+fn ring_road() -> RoadNetwork {
+    let cfg = Config::from_toml_str(
+        include_str!("../../../config/field-ring.toml"),
+        std::path::Path::new("config/field-ring.toml"),
+    )
+    .unwrap();
+    RoadNetwork::from_config(&cfg.road)
+}
+
+#[test]
+fn a_track_past_a_junction_stays_beside_its_new_road_not_back_at_the_junction() {
+    // field-ring: 3 (1300, 900) -> 4 (600, 1100) -> 5 (-100, 800) west-south-west, or on to
+    // 6 (700, 500) south. A car that cut the corner at 4 is 29 m past it and 8 m beside the
+    // road to 5, heading due west: 23 degrees off that road, 16 off 3 -> 4, whose end (node
+    // 4) lies 29 m behind it.
+    let road = ring_road();
+    let p = Enu2::new(571.0, 1096.0);
+    let west = Enu2::new(-12.0, 0.0);
+    let ahead = road.reachable_from(&p, Some(west), (0.0, 4.0));
+    assert!(ahead.length_m() > 0.0);
+    for ((a, b), _) in ahead.pieces() {
+        // On the road to 5, beside the car: not at node 4, and not south to 6.
+        assert!((a - p).norm() < 15.0 && (b - p).norm() < 15.0, "{a} {b}");
+        assert!(b.x < a.x, "{a} -> {b} does not head west");
+    }
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let route = road.drive(&p, Some(west), &[0.0, 50.0], &mut rng).unwrap();
+    assert!((route[0].0 - p).norm() < 15.0, "{:?}", route[0]);
+    assert!(route[1].0.x < p.x - 40.0, "{:?}", route[1]);
+    // Short of node 4, 4 m beside 3 -> 4 and heading its way: it stays on 3 -> 4.
+    let q = Enu2::new(650.0, 1090.0);
+    let on = road.reachable_from(&q, Some(Enu2::new(-12.0, 3.0)), (0.0, 4.0));
+    for ((a, b), _) in on.pieces() {
+        assert!((a - q).norm() < 15.0 && b.x < a.x, "{a} -> {b}");
+    }
+    // A track that overshot node 4 heading north-west, where neither road out of 4 goes
+    // (68 and 144 degrees off), is still put on the roads out of 4, by their probabilities.
+    let past = Enu2::new(596.0, 1102.0);
+    let out = road.reachable_from(&past, Some(Enu2::new(-8.0, 8.0)), (0.0, 4.0));
+    assert_eq!(out.pieces().count(), 2);
+    assert!(out
+        .pieces()
+        .all(|((a, _), _)| (a - Enu2::new(600.0, 1100.0)).norm() < 1e-6));
+}
