@@ -4,13 +4,17 @@ use super::*;
 use crate::config::Config;
 use rand::SeedableRng;
 
-fn outdoor_road() -> RoadNetwork {
-    let cfg = Config::from_toml_str(
-        include_str!("../../../config/outdoor.toml"),
-        std::path::Path::new("config/outdoor.toml"),
-    )
-    .unwrap();
+/// The road network of a shipped config, given its text and its path.
+fn road_of(toml: &str, path: &str) -> RoadNetwork {
+    let cfg = Config::from_toml_str(toml, std::path::Path::new(path)).unwrap();
     RoadNetwork::from_config(&cfg.road)
+}
+
+fn outdoor_road() -> RoadNetwork {
+    road_of(
+        include_str!("../../../config/outdoor.toml"),
+        "config/outdoor.toml",
+    )
 }
 
 #[test]
@@ -338,12 +342,10 @@ fn a_route_is_driven_along_the_allowed_ways_and_takes_each_turn_by_its_probabili
 }
 
 fn ring_road() -> RoadNetwork {
-    let cfg = Config::from_toml_str(
+    road_of(
         include_str!("../../../config/field-ring.toml"),
-        std::path::Path::new("config/field-ring.toml"),
+        "config/field-ring.toml",
     )
-    .unwrap();
-    RoadNetwork::from_config(&cfg.road)
 }
 
 #[test]
