@@ -33,6 +33,18 @@ impl Tracker {
         }
     }
 
+    /// The way the target was driving when last seen, when its measurements showed it
+    /// moving (faster than a tenth of the largest speed a hypothesis gets); `None` for a
+    /// target seen (nearly) standing, whose measured velocity is the measurement noise's. A
+    /// car that had stopped at a junction to turn was last measured at 0.6 m/s "west", and
+    /// every re-spread route started on the road west while it drove south (field-ring seed
+    /// 2, BENCHMARKS.md "Field scale, part 38"); without a heading each route starts on the
+    /// road nearest its own draw of where the target was.
+    pub(super) fn last_seen_heading(&self) -> Option<Enu2> {
+        let moving = self.last_seen_speed_mps > 0.1 * self.params.filter.init_speed_max_mps;
+        moving.then_some(self.last_seen_velocity_enu)
+    }
+
     /// The speeds new hypotheses get: from 0.7 x the speed the target had when last seen
     /// to 1.3 x the fastest it was measured driving over the last [`CRUISE_WINDOW_S`] (a
     /// car keeps its speed through a junction it cannot be seen at, and one last seen
@@ -115,7 +127,7 @@ impl Tracker {
     fn respread_along_routes(&mut self, t_s: f64) -> bool {
         let cue_roads;
         let (tm, start) = match (self.last_measurement, self.params.cue) {
-            (Some((tm, zm)), _) => (tm, RouteStart::At(zm, Some(self.last_seen_velocity_enu))),
+            (Some((tm, zm)), _) => (tm, RouteStart::At(zm, self.last_seen_heading())),
             (None, Some(cue)) => {
                 cue_roads = self.world.road.roads_within(Some(cue));
                 if cue_roads.length_m() <= 0.0 {

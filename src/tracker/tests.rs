@@ -422,6 +422,60 @@ fn the_re_spread_keeps_out_the_branch_the_camera_has_watched_empty() {
     assert!((mean.x - 500.0).abs() < 5.0 && mean.y > 60.0, "{mean}");
 }
 
+/// The car seen driving east into field-grid's fork at (500, 0), then measured for 4 s at
+/// `(500 + creep_mps t, 3)`, 3 m up the north road, then unseen (the camera far off the
+/// roads near the fork) until after the re-spread: the belief's weight on the north road
+/// and on the east road beyond the fork.
+fn re_spread_after_the_fork(creep_mps: f64) -> (f64, f64) {
+    let c = field_grid();
+    let dt = 1.0 / c.timing.filter_hz;
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    let mut t_s = seen_driving_east(&mut t, dt, 12.0, 12.0);
+    let mut x = 468.0;
+    while x < 500.0 {
+        t_s += dt;
+        x = (x + 12.0 * dt).min(500.0);
+        let car = Enu2::new(x, 0.0);
+        frame(&mut t, t_s, car, Some(car));
+    }
+    let stopped_s = t_s;
+    while t_s < stopped_s + 4.0 {
+        t_s += dt;
+        let car = Enu2::new(500.0 + creep_mps * (t_s - stopped_s), 3.0);
+        frame(&mut t, t_s, car, Some(car));
+    }
+    let far = Enu2::new(250.0, 250.0);
+    let lost_s = t_s;
+    while t_s < lost_s + c.daemon.target_lost_after_s + 1.0 {
+        t_s += dt;
+        frame(&mut t, t_s, far, None);
+    }
+    let pf = t.estimator().particle_filter().unwrap();
+    let (mut north, mut east) = (0.0, 0.0);
+    for (p, w) in pf.particles().iter().zip(pf.weights()) {
+        if p.y > 5.0 && (p.x - 500.0).abs() < 5.0 {
+            north += w;
+        } else if p.x > 505.0 && p.y.abs() < 5.0 {
+            east += w;
+        }
+    }
+    (north, east)
+}
+
+#[test]
+fn a_car_seen_standing_is_re_spread_from_the_road_it_stands_on_not_its_noise_heading() {
+    // Standing 3 m up the north road, its measurements creeping east at 0.3 m/s (noise: a
+    // tenth of field-grid's largest hypothesis speed is 1.6 m/s): the routes start on the
+    // road nearest where it was, north; before session 41 the creep's heading put every
+    // route on the road east (north 0.03, east 0.92).
+    let (north, east) = re_spread_after_the_fork(0.3);
+    assert!(north > 0.7 && east < 0.2, "north {north}, east {east}");
+    // Both ways: measured driving east at 5 m/s from the same place, the heading counts and
+    // the routes go east.
+    let (north, east) = re_spread_after_the_fork(5.0);
+    assert!(east > 0.9 && north < 0.05, "north {north}, east {east}");
+}
+
 #[test]
 fn a_car_last_seen_slowing_is_re_spread_up_to_its_cruising_speed() {
     let c = field_grid();
