@@ -398,24 +398,12 @@ fn the_re_spread_keeps_out_the_branch_the_camera_has_watched_empty() {
     let c = field_grid();
     let dt = 1.0 / c.timing.filter_hz;
     let mut t = tracker(&c, GuidanceKind::Eer, false);
-    let mut t_s = seen_driving_east(&mut t, dt, 12.0, 12.0);
+    let t_s = seen_driving_east(&mut t, dt, 12.0, 12.0);
     // Then nothing, the camera over the east exit of the fork, until after the re-spread
     // (`daemon.target_lost_after_s`, 10 s).
     let watched = Enu2::new(550.0, 0.0);
-    let lost_s = t_s;
-    while t_s < lost_s + c.daemon.target_lost_after_s + 1.0 {
-        t_s += dt;
-        frame(&mut t, t_s, watched, None);
-    }
-    let pf = t.estimator().particle_filter().unwrap();
-    let (mut north, mut east) = (0.0, 0.0);
-    for (p, w) in pf.particles().iter().zip(pf.weights()) {
-        if p.y > 40.0 && (p.x - 500.0).abs() < 5.0 {
-            north += w;
-        } else if p.x > 530.0 && p.y.abs() < 5.0 {
-            east += w;
-        }
-    }
+    unseen_until_after_the_re_spread(&mut t, &c, t_s, watched);
+    let (north, east) = weights_past_the_fork(&t, 40.0, 530.0);
     // The car can be 60-190 m on; it drove through the watched view only on the east.
     assert!(north > 0.95 && east < 0.01, "north {north}, east {east}");
     let mean = t.estimator().mean();
@@ -444,18 +432,30 @@ fn re_spread_after_the_fork(creep_mps: f64) -> (f64, f64) {
         let car = Enu2::new(500.0 + creep_mps * (t_s - stopped_s), 3.0);
         frame(&mut t, t_s, car, Some(car));
     }
-    let far = Enu2::new(250.0, 250.0);
+    unseen_until_after_the_re_spread(&mut t, &c, t_s, Enu2::new(250.0, 250.0));
+    weights_past_the_fork(&t, 5.0, 505.0)
+}
+
+/// Frames without the target from `camera`, from `t_s` until a second after the re-spread
+/// is due (`daemon.target_lost_after_s`).
+fn unseen_until_after_the_re_spread(t: &mut Tracker, c: &Config, mut t_s: f64, camera: Enu2) {
+    let dt = 1.0 / c.timing.filter_hz;
     let lost_s = t_s;
     while t_s < lost_s + c.daemon.target_lost_after_s + 1.0 {
         t_s += dt;
-        frame(&mut t, t_s, far, None);
+        frame(t, t_s, camera, None);
     }
+}
+
+/// The belief's weight on field-grid's north road beyond `north_y` and on its east road
+/// beyond `east_x`, past the fork at (500, 0).
+fn weights_past_the_fork(t: &Tracker, north_y: f64, east_x: f64) -> (f64, f64) {
     let pf = t.estimator().particle_filter().unwrap();
     let (mut north, mut east) = (0.0, 0.0);
     for (p, w) in pf.particles().iter().zip(pf.weights()) {
-        if p.y > 5.0 && (p.x - 500.0).abs() < 5.0 {
+        if p.y > north_y && (p.x - 500.0).abs() < 5.0 {
             north += w;
-        } else if p.x > 505.0 && p.y.abs() < 5.0 {
+        } else if p.x > east_x && p.y.abs() < 5.0 {
             east += w;
         }
     }
