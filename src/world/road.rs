@@ -284,10 +284,23 @@ impl RoadNetwork {
     /// edges it lies beyond an end of.
     fn nearest_edge(&self, p: &Enu2, heading: Option<Enu2>) -> Option<(usize, usize, f64)> {
         let heading = heading.filter(|h| h.norm() > 1e-9).map(|h| h.normalize());
-        let nearest = self
-            .edge_projections(p)
-            .map(|e| e.distance_m)
-            .fold(f64::INFINITY, f64::min);
+        let goes_its_way = |e: &EdgeProjection| {
+            heading
+                .is_some_and(|h| e.overshoot_m <= 0.0 && e.direction.dot(&h) >= ALONG_HEADING_COS)
+        };
+        // One pass for the nearest edge's distance and the nearest one the point lies
+        // alongside and goes the way of (it runs per particle in the re-route and EER's
+        // rollout).
+        let (nearest, nearest_its_way) =
+            self.edge_projections(p)
+                .fold((f64::INFINITY, f64::INFINITY), |(any, its_way), e| {
+                    let its_way = if goes_its_way(&e) {
+                        its_way.min(e.distance_m)
+                    } else {
+                        its_way
+                    };
+                    (any.min(e.distance_m), its_way)
+                });
         // The heading chooses only among the edges about as near as the nearest: with it
         // weighed against any distance (before session 25, a 90-degree difference as 1 km),
         // a slow track 10 m short of a junction whose velocity's noise pointed east was put
@@ -301,13 +314,7 @@ impl RoadNetwork {
         // back, its share down the other branch survived the camera while the car drove out
         // of view, and the drone followed it (field-ring seed 1, BENCHMARKS "Field scale,
         // part 38").
-        let goes_its_way = |e: &EdgeProjection| {
-            heading
-                .is_some_and(|h| e.overshoot_m <= 0.0 && e.direction.dot(&h) >= ALONG_HEADING_COS)
-        };
-        let alongside = self
-            .edge_projections(p)
-            .any(|e| e.distance_m <= near && goes_its_way(&e));
+        let alongside = nearest_its_way <= near;
         let mut best: Option<(f64, (usize, usize, f64))> = None;
         for e in self.edge_projections(p) {
             if e.distance_m > near || (alongside && !goes_its_way(&e)) {
