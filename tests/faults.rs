@@ -346,7 +346,7 @@ fn mock_process(flavor: &str, port: u16, key: Option<&Path>) -> MockProcess {
         c.arg("--signing-key").arg(k);
     }
     let m = MockProcess(c.spawn().unwrap());
-    std::thread::sleep(Duration::from_millis(300));
+    common::wait_for_udp_listener(port);
     m
 }
 

@@ -3,7 +3,9 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output};
-use std::time::Duration;
+
+mod common;
+use common::{free_udp_port, wait_for_udp_listener};
 
 struct Mock(Child);
 impl Drop for Mock {
@@ -21,14 +23,6 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-fn free_udp_port() -> u16 {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 fn mock(flavor: &str) -> (Mock, u16) {
     let port = free_udp_port();
     let child = bin()
@@ -41,8 +35,9 @@ fn mock(flavor: &str) -> (Mock, u16) {
         ])
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(300));
-    (Mock(child), port)
+    let mock = Mock(child);
+    wait_for_udp_listener(port);
+    (mock, port)
 }
 
 fn params(action: &str, file: &Path, port: u16) -> Output {
@@ -157,7 +152,7 @@ fn a_signed_vehicle_answers_only_a_signed_companion() {
         .spawn()
         .unwrap();
     let _mock = Mock(child);
-    std::thread::sleep(Duration::from_millis(300));
+    wait_for_udp_listener(port);
     let file = dir.path().join("one.parm");
     std::fs::write(&file, "WPNAV_SPEED,1000\n").unwrap();
     let run = |with_key: bool| {

@@ -11,7 +11,6 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output};
-use std::time::Duration;
 
 mod common;
 use common::free_udp_port;
@@ -31,8 +30,9 @@ fn mock_process(flavor: &str, port: u16) -> MockProcess {
         .arg(format!("udpin:127.0.0.1:{port}"))
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(300));
-    MockProcess(child)
+    let mock = MockProcess(child);
+    common::wait_for_udp_listener(port);
+    mock
 }
 
 /// The virtual environment's Python, or a failure that says how to make it.

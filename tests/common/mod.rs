@@ -16,6 +16,34 @@ pub fn free_udp_port() -> u16 {
         .port()
 }
 
+/// Waits (at most 10 s) until a process listens on loopback UDP `port`, read from the
+/// kernel's socket table (`/proc/net/udp`) so the check never holds the port itself. A fixed
+/// sleep after spawning a mock process raced its start on a busy machine: a command sent
+/// before the mock had bound its port was lost and the test failed.
+pub fn wait_for_udp_listener(port: u16) {
+    let bound = || {
+        ["/proc/net/udp", "/proc/net/udp6"].iter().any(|table| {
+            std::fs::read_to_string(table).is_ok_and(|text| {
+                text.lines().skip(1).any(|line| {
+                    let local = line.split_whitespace().nth(1).unwrap_or("");
+                    local
+                        .rsplit_once(':')
+                        .and_then(|(_, hex)| u16::from_str_radix(hex, 16).ok())
+                        == Some(port)
+                })
+            })
+        })
+    };
+    let until = std::time::Instant::now() + Duration::from_secs(10);
+    while !bound() {
+        assert!(
+            std::time::Instant::now() < until,
+            "nothing listens on UDP port {port} 10 s after the mock process was started"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Flies to (x, y) ENU at `alt` and waits until the reported position is within 0.5 m.
 pub async fn fly_to(link: &VehicleLink, x: f64, y: f64, alt: f64) {
     let p = PositionEnu {
@@ -66,18 +94,26 @@ pub async fn expect_failsafe(
 }
 
 /// A mock autopilot listening on a free loopback UDP port, without faults; and the port.
+/// A port free when asked can be taken by a concurrent test before the mock binds it: then
+/// another is asked for (at most 20 times).
 pub async fn udp_mock(
     cfg: infotrack::mock::MockConfig,
 ) -> (infotrack::mock::server::MockHandle, u16) {
-    let port = free_udp_port();
-    let mock = infotrack::mock::server::spawn(
-        &format!("udpin:127.0.0.1:{port}"),
-        cfg,
-        infotrack::mock::server::Faults::default(),
-    )
-    .await
-    .unwrap();
-    (mock, port)
+    let mut tries = 0;
+    loop {
+        let port = free_udp_port();
+        match infotrack::mock::server::spawn(
+            &format!("udpin:127.0.0.1:{port}"),
+            cfg.clone(),
+            infotrack::mock::server::Faults::default(),
+        )
+        .await
+        {
+            Ok(mock) => return (mock, port),
+            Err(e) if e.kind() == std::io::ErrorKind::AddrInUse && tries < 20 => tries += 1,
+            Err(e) => panic!("the mock autopilot could not listen on UDP port {port}: {e}"),
+        }
+    }
 }
 
 /// Polls `pred` every 50 ms for at most `secs`; whether it came true.
