@@ -9,14 +9,14 @@
 mod common;
 
 use std::net::SocketAddr;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use common::{free_udp_port, lab_config_with, output_text, udp_mock};
+use common::{free_udp_port, lab_config_with, mock_process, output_text, udp_mock};
 use infotrack::autopilot::modes::Flavor;
 use infotrack::mock::MockConfig;
 use mavlink::dialects::ardupilotmega::*;
@@ -327,27 +327,6 @@ async fn a_full_disk_is_said_to_the_log_and_the_gcs_and_the_flight_goes_on() {
     let flight = std::fs::read_to_string(dir.path().join("flight.csv")).unwrap();
     let (_, _, steps) = infotrack::daemon::flight_log::parse(&flight, "flight.csv").unwrap();
     assert!(steps.len() > 10, "{} records kept", steps.len());
-}
-
-/// `infotrack mock-autopilot` in its own process, killed on drop.
-struct MockProcess(std::process::Child);
-impl Drop for MockProcess {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn mock_process(flavor: &str, port: u16, key: Option<&Path>) -> MockProcess {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_infotrack"));
-    c.args(["mock-autopilot", "--flavor", flavor, "--listen"])
-        .arg(format!("udpin:127.0.0.1:{port}"));
-    if let Some(k) = key {
-        c.arg("--signing-key").arg(k);
-    }
-    let m = MockProcess(c.spawn().unwrap());
-    common::wait_for_udp_listener(port);
-    m
 }
 
 /// Row "a signing mismatch is reported as a silent vehicle or a missing ACK": the daemon's

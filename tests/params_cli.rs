@@ -2,18 +2,10 @@
 //! over UDP, with the shipped parameter files of both formats.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output};
+use std::process::{Command, Output};
 
 mod common;
-use common::{free_udp_port, wait_for_udp_listener};
-
-struct Mock(Child);
-impl Drop for Mock {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use common::{free_udp_port, mock_process, MockProcess};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_infotrack"))
@@ -23,21 +15,9 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-fn mock(flavor: &str) -> (Mock, u16) {
+fn mock(flavor: &str) -> (MockProcess, u16) {
     let port = free_udp_port();
-    let child = bin()
-        .args([
-            "mock-autopilot",
-            "--flavor",
-            flavor,
-            "--listen",
-            &format!("udpin:127.0.0.1:{port}"),
-        ])
-        .spawn()
-        .unwrap();
-    let mock = Mock(child);
-    wait_for_udp_listener(port);
-    (mock, port)
+    (mock_process(flavor, port, None), port)
 }
 
 fn params(action: &str, file: &Path, port: u16) -> Output {
@@ -144,15 +124,7 @@ fn a_signed_vehicle_answers_only_a_signed_companion() {
     let key = dir.path().join("mavlink.key");
     std::fs::write(&key, format!("# lab key\n{}\n", "3c".repeat(32))).unwrap();
     let port = free_udp_port();
-    let child = bin()
-        .args(["mock-autopilot", "--flavor", "ardupilot", "--listen"])
-        .arg(format!("udpin:127.0.0.1:{port}"))
-        .arg("--signing-key")
-        .arg(&key)
-        .spawn()
-        .unwrap();
-    let _mock = Mock(child);
-    wait_for_udp_listener(port);
+    let _mock = mock_process("ardupilot", port, Some(&key));
     let file = dir.path().join("one.parm");
     std::fs::write(&file, "WPNAV_SPEED,1000\n").unwrap();
     let run = |with_key: bool| {

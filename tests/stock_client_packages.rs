@@ -10,30 +10,10 @@
 //! skip.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output};
+use std::process::{Command, Output};
 
 mod common;
-use common::free_udp_port;
-
-/// `infotrack mock-autopilot` in its own process, killed on drop.
-struct MockProcess(Child);
-impl Drop for MockProcess {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn mock_process(flavor: &str, port: u16) -> MockProcess {
-    let child = Command::new(env!("CARGO_BIN_EXE_infotrack"))
-        .args(["mock-autopilot", "--flavor", flavor, "--listen"])
-        .arg(format!("udpin:127.0.0.1:{port}"))
-        .spawn()
-        .unwrap();
-    let mock = MockProcess(child);
-    common::wait_for_udp_listener(port);
-    mock
-}
+use common::{free_udp_port, mock_process};
 
 /// The virtual environment's Python, or a failure that says how to make it.
 fn stock_python() -> PathBuf {
@@ -85,7 +65,7 @@ fn assert_flew(o: &Output, client: &str) {
 #[test]
 fn mavsdk_flies_the_px4_mock() {
     let port = free_udp_port();
-    let _mock = mock_process("px4", port);
+    let _mock = mock_process("px4", port, None);
     let o = run_client("mavsdk_px4.py", port, None);
     assert_flew(&o, "mavsdk");
     let out = String::from_utf8_lossy(&o.stdout);
@@ -105,7 +85,7 @@ fn mavsdk_flies_the_px4_mock() {
 #[test]
 fn pymavlink_flies_the_ardupilot_mock() {
     let port = free_udp_port();
-    let _mock = mock_process("ardupilot", port);
+    let _mock = mock_process("ardupilot", port, None);
     let o = run_client("pymavlink_ardupilot.py", port, None);
     assert_flew(&o, "pymavlink");
     let out = String::from_utf8_lossy(&o.stdout);
@@ -124,7 +104,7 @@ fn pymavlink_flies_the_ardupilot_mock() {
 #[test]
 fn mavproxy_flies_the_ardupilot_mock() {
     let port = free_udp_port();
-    let _mock = mock_process("ardupilot", port);
+    let _mock = mock_process("ardupilot", port, None);
     let dir = tempfile::tempdir().unwrap();
     let o = run_client("mavproxy_ardupilot.py", port, Some(dir.path()));
     assert_flew(&o, "mavproxy");

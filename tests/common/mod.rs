@@ -44,6 +44,31 @@ pub fn wait_for_udp_listener(port: u16) {
     }
 }
 
+/// `infotrack mock-autopilot` in its own process, killed (and reaped) on drop.
+pub struct MockProcess(std::process::Child);
+
+impl Drop for MockProcess {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `infotrack mock-autopilot --flavor <flavor>` listening on loopback UDP `port`,
+/// signing with the key file `key` if one is given, and returns once it has bound the port.
+pub fn mock_process(flavor: &str, port: u16, key: Option<&std::path::Path>) -> MockProcess {
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_infotrack"));
+    command
+        .args(["mock-autopilot", "--flavor", flavor, "--listen"])
+        .arg(format!("udpin:127.0.0.1:{port}"));
+    if let Some(key) = key {
+        command.arg("--signing-key").arg(key);
+    }
+    let mock = MockProcess(command.spawn().expect("spawn infotrack mock-autopilot"));
+    wait_for_udp_listener(port);
+    mock
+}
+
 /// Flies to (x, y) ENU at `alt` and waits until the reported position is within 0.5 m.
 pub async fn fly_to(link: &VehicleLink, x: f64, y: f64, alt: f64) {
     let p = PositionEnu {
