@@ -3,7 +3,7 @@
 
 use super::{Config, SpeedLimitShape};
 use crate::estimation::{FilterParams, KalmanParams};
-use crate::guidance::eer::DEFAULT_SEARCH_COMMITMENT;
+use crate::guidance::eer::{DEFAULT_CENTRING_SHARE, DEFAULT_SEARCH_COMMITMENT};
 use crate::guidance::{EerParams, GuidanceKind, ReachShape};
 use crate::motion::MotionParams;
 use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams};
@@ -117,6 +117,7 @@ impl Config {
             step_s: self.filter_dt_s(),
             intercept_within_s: g.intercept_within_s,
             search_commitment: g.search_commitment.unwrap_or(DEFAULT_SEARCH_COMMITMENT),
+            centring_share: g.centring_share.unwrap_or(DEFAULT_CENTRING_SHARE),
         }
     }
 

@@ -527,6 +527,14 @@ pub struct GuidanceConfig {
     /// 0.2; 0 restores the paper's argmax always.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_commitment: Option<f64>,
+    /// Centring while tracking (not searching), a share of the EER range in [0, 1]: of the
+    /// candidates whose EER is within this share of the range below the best, the plan takes
+    /// the one nearest the belief's predicted mean, so the view is centred on the target
+    /// rather than anywhere that holds it (a choice among nearly equal maxima of the paper's
+    /// argmax; BENCHMARKS "Field scale, part 40"). Optional; absent, 0.02; 0 breaks exact
+    /// ties only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub centring_share: Option<f64>,
     /// The lawnmower sweep.
     pub lawn: LawnConfig,
 }

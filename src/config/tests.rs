@@ -317,27 +317,36 @@ fn the_agent_speed_limit_shape_is_optional_and_a_bad_one_is_named() {
     );
 }
 
-/// `guidance.search_commitment` is optional (absent: 0.2), a share in [0, 1] is passed to
-/// EER as given, and one outside it (or NaN) is an error naming the key.
+/// `guidance.search_commitment` (absent: 0.2) and `guidance.centring_share` (absent: 0.02)
+/// are optional, a share in [0, 1] is passed to EER as given, and one outside it (or NaN) is
+/// an error naming the key.
 #[test]
-fn the_search_commitment_is_optional_and_a_bad_one_is_named() {
+fn the_eer_shares_are_optional_and_a_bad_one_is_named() {
+    type Share = fn(&crate::guidance::eer::EerParams) -> f64;
+    let keys: [(&str, f64, Share); 2] = [
+        ("search_commitment", 0.2, |p| p.search_commitment),
+        ("centring_share", 0.02, |p| p.centring_share),
+    ];
     let c = Config::default_lab();
     assert_eq!(c.guidance.search_commitment, None);
-    assert_eq!(c.eer_params().search_commitment, 0.2);
-    for share in [0.0, 0.5, 1.0] {
-        let set = load_modified(|t| {
-            tbl(t, "guidance").insert("search_commitment".into(), share.into());
-        })
-        .unwrap();
-        assert_eq!(set.eer_params().search_commitment, share);
-    }
-    for bad in [-0.1, 1.5, f64::NAN] {
-        let msg = load_modified(|t| {
-            tbl(t, "guidance").insert("search_commitment".into(), bad.into());
-        })
-        .unwrap_err()
-        .to_string();
-        assert!(msg.contains("guidance.search_commitment"), "{msg}");
+    assert_eq!(c.guidance.centring_share, None);
+    for (key, default, share_of) in keys {
+        assert_eq!(share_of(&c.eer_params()), default, "{key}");
+        for share in [0.0, 0.5, 1.0] {
+            let set = load_modified(|t| {
+                tbl(t, "guidance").insert(key.into(), share.into());
+            })
+            .unwrap();
+            assert_eq!(share_of(&set.eer_params()), share, "{key}");
+        }
+        for bad in [-0.1, 1.5, f64::NAN] {
+            let msg = load_modified(|t| {
+                tbl(t, "guidance").insert(key.into(), bad.into());
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(msg.contains(&format!("guidance.{key}")), "{msg}");
+        }
     }
 }
 

@@ -245,10 +245,13 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     if let Some(t) = g.intercept_within_s {
         positive("guidance.intercept_within_s", t)?;
     }
-    if let Some(share) = g.search_commitment {
-        if !(0.0..=1.0).contains(&share) {
+    for (key, share) in [
+        ("guidance.search_commitment", g.search_commitment),
+        ("guidance.centring_share", g.centring_share),
+    ] {
+        if let Some(share) = share.filter(|s| !(0.0..=1.0).contains(s)) {
             return Err(invalid(
-                "guidance.search_commitment",
+                key,
                 share,
                 "must be a share of the EER range, from 0 to 1",
             ));

@@ -39,7 +39,7 @@
 use rand::Rng;
 
 mod commitment;
-pub use commitment::committed_choice;
+pub use commitment::{committed_choice, Centring};
 
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
 use crate::estimation::{road_following, ParticleFilter};
@@ -52,6 +52,11 @@ use crate::world::World;
 /// session 22 first measured (outdoors level with the argmax) and session 27 measured on
 /// every world (BENCHMARKS.md "Field scale, part 26"); not tuned per world.
 pub const DEFAULT_SEARCH_COMMITMENT: f64 = 0.2;
+
+/// `centring_share` when a config leaves `guidance.centring_share` out ([`Centring`]):
+/// measured on the seven field worlds and the lab (BENCHMARKS.md "Field scale, part 40");
+/// not tuned per world.
+pub const DEFAULT_CENTRING_SHARE: f64 = 0.02;
 
 /// EER parameters (the configuration assembles them).
 #[derive(Debug, Clone)]
@@ -88,6 +93,9 @@ pub struct EerParams {
     /// best within which the candidate nearest the previous waypoint is kept
     /// ([`committed_choice`]); 0: the paper's argmax always.
     pub search_commitment: f64,
+    /// While tracking, the share of the EER range below the best within which the candidate
+    /// nearest the belief's predicted mean is taken ([`Centring`]); 0: exact ties only.
+    pub centring_share: f64,
 }
 
 /// Everything the evaluation needs, after the rollout: pure data.
@@ -729,18 +737,20 @@ impl EerPlanner {
             &mut self.scratch,
         );
         let previous = self.last_waypoint_enu.filter(|_| self.searching);
-        let best = committed_choice(&eer, &cands, previous, p.search_commitment);
+        let mut predicted_mean = Enu2::zeros();
+        for (p, w) in self.inputs.predicted.iter().zip(&self.inputs.weights) {
+            predicted_mean += *w * p;
+        }
+        let centring = Centring {
+            mean_enu: predicted_mean,
+            share: p.centring_share,
+        };
+        let best = committed_choice(&eer, &cands, previous, p.search_commitment, Some(centring));
         let waypoint = match best {
             Some(i) => cands[i],
             // Nothing to choose between (no candidate sees any particle): head for the
             // predicted mean, where the target most likely is.
-            None => {
-                let mut m = Enu2::zeros();
-                for (p, w) in self.inputs.predicted.iter().zip(&self.inputs.weights) {
-                    m += *w * p;
-                }
-                world.workspace_enu.clamp(&m)
-            }
+            None => world.workspace_enu.clamp(&predicted_mean),
         };
         self.last_waypoint_enu = Some(waypoint);
         EerDecision {
