@@ -524,10 +524,12 @@ pub struct GuidanceConfig {
     /// keeps to the one nearest its previous waypoint, so the drone flies to one mode of a
     /// spread belief instead of back and forth between them (a departure from the paper's
     /// argmax; BENCHMARKS "Field scale, parts 26-27"). Tracking, the argmax. Optional; absent,
-    /// 0.2; 0 restores the paper's argmax always.
+    /// 0.2; 0 with `centring_share = 0` restores the paper's argmax always (exact ties broken
+    /// toward the belief's mean).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_commitment: Option<f64>,
-    /// Centring while tracking (not searching), a share of the EER range in [0, 1]: of the
+    /// Centring while tracking (and whenever there is no previous waypoint to keep to: the
+    /// first plan of a search, or `search_commitment = 0`), a share of the EER range in [0, 1]: of the
     /// candidates whose EER is within this share of the range below the best, the plan takes
     /// the one nearest the belief's predicted mean, so the view is centred on the target
     /// rather than anywhere that holds it (a choice among nearly equal maxima of the paper's

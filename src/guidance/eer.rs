@@ -91,9 +91,9 @@ pub struct EerParams {
     pub intercept_within_s: Option<f64>,
     /// While searching ([`EerPlanner::set_searching`]), the share of the EER range below the
     /// best within which the candidate nearest the previous waypoint is kept
-    /// ([`committed_choice`]); 0: the paper's argmax always.
+    /// ([`committed_choice`]); 0: no commitment (then [`Centring`] decides).
     pub search_commitment: f64,
-    /// While tracking, the share of the EER range below the best within which the candidate
+    /// Without a previous waypoint to keep to, the share of the EER range below the best within which the candidate
     /// nearest the belief's predicted mean is taken ([`Centring`]); 0: exact ties only.
     pub centring_share: f64,
 }

@@ -9,8 +9,12 @@
 //! since the belief stopped being local, see the tracker), the plan keeps to the candidate
 //! nearest its previous waypoint among those whose EER is within a share of the EER range
 //! below the best, so the drone flies to one mode unless another is clearly better. A
-//! departure from the paper's eq. 14 (the argmax), documented; `guidance.search_commitment
-//! = 0` restores it.
+//! departure from the paper's eq. 14 (the argmax), documented.
+//!
+//! Centring otherwise ([`Centring`]): with no previous waypoint to keep to (tracking, the
+//! first plan of a search, or `guidance.search_commitment = 0`), the candidate nearest the
+//! belief's predicted mean among those within `guidance.centring_share` of the best. Both
+//! shares 0 give the paper's argmax, exact ties broken toward the mean.
 
 use crate::world::geometry::Enu2;
 
