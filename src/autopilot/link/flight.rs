@@ -2,6 +2,9 @@
 
 use super::*;
 
+/// The period of both firmwares' HEARTBEAT (1 Hz, as the SITL builds send it).
+const HEARTBEAT_PERIOD: Duration = Duration::from_secs(1);
+
 /// The newest STATUSTEXT waiting in `rx`, into `said` (events lost to a lagging receiver
 /// are skipped).
 fn latest_text(rx: &mut broadcast::Receiver<LinkEvent>, said: &mut Option<String>) {
@@ -15,6 +18,16 @@ fn latest_text(rx: &mut broadcast::Receiver<LinkEvent>, said: &mut Option<String
 }
 
 impl VehicleLink {
+    /// How long an accepted arm or mode change may take to show in the vehicle's heartbeat:
+    /// one heartbeat period per command attempt, at least three. Both firmwares send the
+    /// heartbeat at 1 Hz, so a lossy radio can drop several in a row after a command it
+    /// did accept; this tolerates as many lost heartbeats as [`LinkConfig::attempts`]
+    /// tolerates lost commands. It waits rather than sending the command again: a second
+    /// arm or mode change could undo what the pilot did in the meantime.
+    fn confirm_window(&self) -> Duration {
+        HEARTBEAT_PERIOD * self.cfg.attempts.max(3)
+    }
+
     /// MAV_CMD_DO_SET_MODE with the firmware's encoding; waits until the heartbeat shows it.
     pub async fn set_mode(&self, mode: Mode) -> Result<(), LinkError> {
         let flavor = self.flavor();
@@ -30,7 +43,7 @@ impl VehicleLink {
         self.wait_for(
             |s| s.mode == Some(mode),
             &format!("mode {mode:?}"),
-            Duration::from_secs(3),
+            self.confirm_window(),
         )
         .await
     }
@@ -96,7 +109,7 @@ impl VehicleLink {
             [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
         )
         .await?;
-        self.wait_for(|s| s.armed, "armed", Duration::from_secs(3))
+        self.wait_for(|s| s.armed, "armed", self.confirm_window())
             .await
     }
 

@@ -142,7 +142,8 @@ pub struct LinkConfig {
     pub component_id: u8,
     /// How long one command attempt waits for its ACK.
     pub ack_timeout: Duration,
-    /// Attempts per command.
+    /// Attempts per command; also how many heartbeat periods (at least three) an accepted
+    /// arm or mode change may take to show in the heartbeat on a lossy link.
     pub attempts: u32,
     /// Setpoint rate, Hz (PX4 needs > 2; use >= 10).
     pub setpoint_hz: f64,
