@@ -1,27 +1,29 @@
 #!/usr/bin/env python3
 """Write a field-scale world drawn at random, for measuring infotrack on worlds nobody tuned to.
 
-    python3 scripts/random-world.py SEED [TWO_WAY_SHARE] > world.toml
+    python3 scripts/random-world.py SEED [TWO_WAY_SHARE] [--orientation robbins|random] > world.toml
     infotrack sim --config world.toml --runs 10 --guidance eer --motion cv
 
 Issue 12's last target is measured on a field world we have not seen, written in the config
 schema plus `[acquisition]`. The hand-made stand-ins (config/field-*.toml) were each written
 to hold one difficulty; this draws the world itself from a seed so that a batch over seeds is
-a sample of worlds, not a choice: a jittered grid of junctions 350-550 m apart, streets
-dropped at random (the graph kept strongly connected), each street two-way with probability
-TWO_WAY_SHARE (default 0.5; the one-way streets oriented so that every junction reaches every
-other, a street that is the only link between two parts two-way; a two-way street lets the car turn back at its junctions, since the
-schema's turn probabilities belong to the node), turn
-probabilities drawn per junction, a car at 10-15 m/s, a drone at 45-60 m with a 1280 or
+a sample of worlds, not a choice: a jittered grid of junctions 350-550 m apart, a fifth of
+the streets dropped (the graph kept connected), each street two-way with probability
+TWO_WAY_SHARE (default 0.5; a two-way street lets the car turn back at its junctions, since
+the schema's turn probabilities belong to the node), the one-way streets oriented so that
+every junction reaches every other (`robbins`, the default: a depth-first orientation, a
+street that is the only link between two parts two-way; `random`: each drawn at random, then
+made two-way until every junction reaches every other, the first draw of BENCHMARKS part 42),
+turn probabilities drawn per junction, a car at 10-15 m/s, a drone at 45-60 m with a 1280 or
 1920 px camera, 1-1.5 m tag, one covered junction and one tree line along a street, the
 operator's cue within 50 m of the car's start. The filter and guidance sections are the
 stand-ins' (no optional key a world writer would not know, no model). Python's own `random`
 only, so the same seed writes the same world on any machine.
 """
 
+import argparse
 import math
 import random
-import sys
 
 
 def strongly_connected(n, directed):
@@ -56,25 +58,24 @@ def robbins_orientation(n, streets, rng):
         rng.shuffle(v)
     order, directed, done = {}, set(), set()
 
-    def dfs(v, parent):
+    def dfs(v):
         order[v] = len(order)
         for u in adj[v]:
             key = frozenset((u, v))
             if key in done:
                 continue
             done.add(key)
-            if u in order:
-                directed.add((v, u))
-            else:
-                directed.add((v, u))
-                dfs(u, v)
+            # First met from v: a tree street (u new) or a loop closed back to an ancestor.
+            directed.add((v, u))
+            if u not in order:
+                dfs(u)
 
-    dfs(rng.randrange(n), None)
+    dfs(rng.randrange(n))
     return directed
 
 
-def draw_graph(rng, two_way_share):
-    """Nodes (id, x, y) and directed edges (a, b, p)."""
+def draw_graph(rng, two_way_share, orientation):
+    """Junctions (id, x, y) and directed streets (a, b, p)."""
     rows, cols = rng.choice([(2, 3), (3, 3), (2, 4), (3, 4)])
     spacing = rng.uniform(350.0, 550.0)
     jitter = 0.18 * spacing
@@ -100,6 +101,8 @@ def draw_graph(rng, two_way_share):
         trial = [t for t in kept if t != s]
         if strongly_connected(n, set(trial) | {(b, a) for a, b in trial}):
             kept = trial
+    if orientation == "random":
+        return nodes, turn_probabilities(n, randomly_oriented(n, kept, two_way_share, rng), rng)
     directed = robbins_orientation(n, kept, rng)
     for a, b in kept:
         if rng.random() < two_way_share:
@@ -110,6 +113,32 @@ def draw_graph(rng, two_way_share):
         if not strongly_connected(n, set(rest) | {(y, x) for x, y in rest}):
             directed |= {(a, b), (b, a)}
     assert strongly_connected(n, directed)
+    return nodes, turn_probabilities(n, directed, rng)
+
+
+def randomly_oriented(n, streets, two_way_share, rng):
+    """Session 45's first draw (worlds 1-8 of BENCHMARKS part 42): each street two-way with
+    probability `two_way_share`, else one way at random; then one-way streets made two-way,
+    in random order, until every junction reaches every other (so even a share of 0 leaves
+    many streets two-way)."""
+    directed = set()
+    one_way = []
+    for a, b in streets:
+        if rng.random() < two_way_share:
+            directed |= {(a, b), (b, a)}
+        else:
+            d = (a, b) if rng.random() < 0.5 else (b, a)
+            directed.add(d)
+            one_way.append(d)
+    rng.shuffle(one_way)
+    while not strongly_connected(n, directed):
+        a, b = one_way.pop()
+        directed.add((b, a))
+    return directed
+
+
+def turn_probabilities(n, directed, rng):
+    """Directed streets (a, b, p): each junction's ways on with probabilities drawn for it."""
     edges = []
     for a in range(n):
         outs = sorted(b for (x, b) in directed if x == a)
@@ -122,7 +151,7 @@ def draw_graph(rng, two_way_share):
             ps = [round(1.0 / len(outs), 2)] * len(outs)
             ps[-1] = round(1.0 - sum(ps[:-1]), 2)
         edges += [(a, b, p) for b, p in zip(outs, ps)]
-    return nodes, edges, spacing
+    return edges
 
 
 def rect(cx, cy, hx, hy):
@@ -131,10 +160,16 @@ def rect(cx, cy, hx, hy):
 
 
 def main():
-    seed = int(sys.argv[1])
-    two_way_share = float(sys.argv[2]) if len(sys.argv) > 2 else 0.5
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("seed", type=int)
+    parser.add_argument("two_way_share", type=float, nargs="?", default=0.5)
+    parser.add_argument("--orientation", choices=["robbins", "random"], default="robbins",
+                        help="how one-way streets get their direction (default robbins; "
+                        "random: the first draw, worlds 1-8 of BENCHMARKS part 42)")
+    args = parser.parse_args()
+    seed, two_way_share = args.seed, args.two_way_share
     rng = random.Random(seed)
-    nodes, edges, spacing = draw_graph(rng, two_way_share)
+    nodes, edges = draw_graph(rng, two_way_share, args.orientation)
     xs = [x for _, x, _ in nodes]
     ys = [y for _, _, y in nodes]
     x0, x1 = min(xs) - 200.0, max(xs) + 200.0
@@ -161,7 +196,8 @@ def main():
     cue_r = rng.uniform(0.0, 50.0)
     out = []
     w = out.append
-    w(f"# Drawn by scripts/random-world.py {seed} {two_way_share}: a world nobody tuned to.")
+    w(f"# Drawn by scripts/random-world.py {seed} {two_way_share} --orientation {args.orientation}:"
+      " a world nobody tuned to.")
     w(f'name = "random-{seed}"')
     w(f"seed = {seed}")
     w("")
