@@ -167,6 +167,8 @@ def main():
                         help="how one-way streets get their direction (default robbins; "
                         "random: the first draw, worlds 1-8 of BENCHMARKS part 42)")
     args = parser.parse_args()
+    if not 0.0 <= args.two_way_share <= 1.0:
+        parser.error(f"two_way_share must lie in [0, 1], got {args.two_way_share}")
     seed, two_way_share = args.seed, args.two_way_share
     rng = random.Random(seed)
     nodes, edges = draw_graph(rng, two_way_share, args.orientation)
