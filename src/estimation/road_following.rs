@@ -52,13 +52,21 @@ pub fn straight_track_on_roads<R: Rng + ?Sized>(
 }
 
 /// Re-routes track `i` if its next straight step (at its track velocity, over `dt_s`) leaves
-/// its road at a junction: it is put on one of the roads it can take within that step (the
-/// turns drawn by their probabilities, never a U-turn back the way it came unless there is
-/// no other way on), keeping its speed. A track whose step runs off the end of a road with
-/// no way on but back (a dead end, or a U-turn edge at it) turns back along it. A track
-/// whose step stays on its road (one piece ahead, or two with the straight-on step within
-/// `on_road_m` of a road: a bend it follows anyway) is left alone. True when the track was
-/// re-routed.
+/// its road at a junction, or reaches a node whose ways on include the turn back: it is put
+/// on one of the roads it can take within that step, the turns drawn by their graph
+/// probabilities, the turn back included (the road network is a Markov chain over nodes, so
+/// a car at a node with a two-way street turns back along it with that edge's probability,
+/// as the simulated car does), keeping its speed. A track whose step runs off the end of a
+/// road with no way on but back (a dead end, or a U-turn edge at it) turns back along it. A
+/// track whose step stays on its road (one piece ahead and no turn back in reach, or two with
+/// the straight-on step within `on_road_m` of a road: a bend it follows anyway) is left
+/// alone. True when the track was re-routed.
+///
+/// Before session 46 the turn back was never drawn where another way on was in reach: the
+/// belief went on while the car turned back, and was lost for good where it did (random-11,
+/// random-2: BENCHMARKS.md "Field scale, part 43"; parts 26 and 30 measured the same change
+/// on older mains, level or worse, before the searching and road-placement rules of parts
+/// 27-38).
 pub fn reroute_track<R: Rng + ?Sized>(
     histories: &mut Histories,
     i: usize,
@@ -73,11 +81,19 @@ pub fn reroute_track<R: Rng + ?Sized>(
     let p = histories.newest(i);
     let v = track_velocity(histories, i, dt_s);
     let speed = v.norm();
-    let (roads, back) = world
-        .road
-        .reachable_from(&p, Some(v), (0.0, speed * dt_s))
-        .split_reversals(&v);
-    let pieces = roads.pieces().count();
+    let (in_reach, edge_enu) = world.road.reachable_along(&p, Some(v), (0.0, speed * dt_s));
+    let all = in_reach.pieces().count();
+    let (ahead, back) = in_reach.clone().split_reversals(&v);
+    let pieces = ahead.pieces().count();
+    // A turn back the graph allows at the node ahead, beside a way on: a piece against the
+    // direction of the edge the track drives along (which it goes the way of). A track
+    // facing against its edge (a slow one whose noise points back, or one off the road
+    // facing a one-way street the wrong way) has no turn back to draw: it is re-routed as
+    // before, by its own heading.
+    let turn_back_in_reach = edge_enu.is_some_and(|d| {
+        let turns_back = in_reach.reversals(&d);
+        d.dot(&v) > 0.0 && turns_back > 0 && turns_back < all
+    });
     let step_on_road = world.road.distance_to_roads(&(p + v * dt_s)) <= on_road_m;
     if pieces == 1 && !step_on_road {
         // A dead end: the track is on its road, the road ends within the step and the only
@@ -92,6 +108,9 @@ pub fn reroute_track<R: Rng + ?Sized>(
             return straight_track_on_roads(histories, i, &back, speed..=speed, dt_s, rng);
         }
     }
+    if turn_back_in_reach {
+        return straight_track_on_roads(histories, i, &in_reach, speed..=speed, dt_s, rng);
+    }
     let follows_its_road = pieces < 2 || (pieces == 2 && step_on_road);
-    !follows_its_road && straight_track_on_roads(histories, i, &roads, speed..=speed, dt_s, rng)
+    !follows_its_road && straight_track_on_roads(histories, i, &ahead, speed..=speed, dt_s, rng)
 }

@@ -210,17 +210,29 @@ impl RoadNetwork {
         heading: Option<Enu2>,
         distance_m: (f64, f64),
     ) -> RoadPieces {
+        self.reachable_along(from, heading, distance_m).0
+    }
+
+    /// [`Self::reachable_from`], and the unit direction (world ENU) of the edge `from` was
+    /// placed on (`None` without roads): what a turn back is told against.
+    pub fn reachable_along(
+        &self,
+        from: &Enu2,
+        heading: Option<Enu2>,
+        distance_m: (f64, f64),
+    ) -> (RoadPieces, Option<Enu2>) {
         let mut out = RoadPieces {
             pieces: Vec::new(),
             weights: Vec::new(),
             total: 0.0,
         };
         let Some((u, v, s0)) = self.nearest_edge(from, heading) else {
-            return out;
+            return (out, None);
         };
         self.walk(u, v, s0, 0.0, 1.0, distance_m, 0, &mut out);
         out.sum_total();
-        out
+        let d = self.nodes[v].position_enu - self.nodes[u].position_enu;
+        (out, (d.norm() > 1e-9).then(|| d.normalize()))
     }
 
     /// Whether the road a target at `from` (heading `heading`, placed as in
@@ -508,6 +520,18 @@ impl RoadPieces {
         ahead.sum_total();
         back.sum_total();
         (ahead, back)
+    }
+
+    /// How many of these pieces run back against `heading` (see [`Self::split_reversals`]).
+    pub fn reversals(&self, heading: &Enu2) -> usize {
+        let h = heading.norm();
+        if h <= 1e-9 {
+            return 0;
+        }
+        self.pieces
+            .iter()
+            .filter(|p| is_reversal(p, heading, h))
+            .count()
     }
 
     /// These pieces less those that run back against `heading` (more than ~154 degrees

@@ -199,9 +199,9 @@ impl ParticleFilter {
     /// Re-routes in place every particle within a step of a junction: a constant-velocity
     /// particle drives straight on through a junction, off the road, where the road
     /// constraint kills it; so each one whose next step leaves its road is put on one of the
-    /// roads it can take within that step (the turns drawn by their probabilities, never a
-    /// U-turn back the way it came unless there is no other way on), keeping its speed
-    /// and its weight. The belief then goes through a junction the way the target can,
+    /// roads it can take within that step (the turns drawn by their graph probabilities, the
+    /// turn back at a node with a two-way street included: [`road_following::reroute_track`]),
+    /// keeping its speed and its weight. The belief then goes through a junction the way the target can,
     /// every branch in proportion (before session 23, 2 % of the particles per step became
     /// road-following clones: a corner kept ~2 % of the weight that reached it, the belief
     /// slowed from 14 to 5-8 m/s at corners and slow clusters sat at the roads' ends;

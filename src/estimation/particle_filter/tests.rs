@@ -434,6 +434,59 @@ fn particles_at_a_junction_are_rerouted_onto_its_branches_and_only_there() {
     assert!((0..n).all(|i| pf.particle(i) == before[i]));
 }
 
+#[test]
+fn particles_at_a_junction_with_a_two_way_street_turn_back_by_its_probability() {
+    // Outdoor: every particle 2 m before node 6 (600, 400) driving north at 10 m/s on the
+    // two-way street 1 <-> 6; from 6 the car goes on north to 4 (p 0.7) or back south to 1
+    // (p 0.3), as the simulated car does. Past the junction the belief takes both, the turn
+    // back at its probability; none is left driving north beyond the step.
+    let c = outdoor();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(11);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let (n, k, dt) = (pf.weights().len(), c.filter.history_len, c.filter_dt_s());
+    let mut h = Histories::new(n, k);
+    for i in 0..n {
+        let tr = h.track_mut(i);
+        for t in 0..k {
+            tr[2 * t] = 600.0;
+            tr[2 * t + 1] = 398.0 - (k - 1 - t) as f64 * 10.0 * dt;
+        }
+    }
+    pf.histories = h;
+    let weights_before = pf.weights().to_vec();
+    pf.reroute_at_junctions(&world, &mut rng);
+    let heading = |i: usize| pf.track_velocity(i);
+    let back = (0..n).filter(|&i| heading(i).y < -9.9).count();
+    let on = (0..n)
+        .filter(|&i| heading(i).y > 9.9 && pf.particle(i).y > 400.0 + 1e-9)
+        .count();
+    let share = back as f64 / (back + on) as f64;
+    assert!(
+        back + on > n / 3,
+        "particles past the junction: {}",
+        back + on
+    );
+    assert!(
+        (share - 0.3).abs() < 0.1,
+        "turned back {share} ({back} back, {on} on)"
+    );
+    for i in 0..n {
+        let p = pf.particle(i);
+        assert!(
+            world.road.distance_to_roads(&p) < 1e-6,
+            "off the road: {p:?}"
+        );
+        assert!((heading(i).norm() - 10.0).abs() < 1e-6, "speed changed");
+        assert!(
+            heading(i).x.abs() < 1e-6,
+            "left the street: {:?}",
+            heading(i)
+        );
+    }
+    assert_eq!(pf.weights(), &weights_before[..]);
+}
+
 /// Outdoor's road 0 -> 1 (y = 0, x 0..600) is one-way east. Particles at x = 300 on it:
 /// a third driving east at 10 m/s, a third west at 10 m/s, a third creeping west at
 /// 0.3 m/s (a step well inside the process noise).
