@@ -44,6 +44,19 @@ fn tracks_along_y0(
     h
 }
 
+/// `n` straight tracks of `k` positions driving north at `speed_mps`, each ending at `end`.
+fn tracks_north(n: usize, k: usize, dt_s: f64, end: Enu2, speed_mps: f64) -> Histories {
+    let mut h = Histories::new(n, k);
+    for i in 0..n {
+        let tr = h.track_mut(i);
+        for t in 0..k {
+            tr[2 * t] = end.x;
+            tr[2 * t + 1] = end.y - (k - 1 - t) as f64 * speed_mps * dt_s;
+        }
+    }
+    h
+}
+
 fn mass_inside(pf: &ParticleFilter, world: &World, agent: &Enu2) -> f64 {
     (0..pf.weights().len())
         .filter(|&i| world.is_wholly_visible(agent, &pf.particle(i)))
@@ -445,15 +458,7 @@ fn particles_at_a_junction_with_a_two_way_street_turn_back_by_its_probability() 
     let mut rng = CoreRng::seed_from_u64(11);
     let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
     let (n, k, dt) = (pf.weights().len(), c.filter.history_len, c.filter_dt_s());
-    let mut h = Histories::new(n, k);
-    for i in 0..n {
-        let tr = h.track_mut(i);
-        for t in 0..k {
-            tr[2 * t] = 600.0;
-            tr[2 * t + 1] = 398.0 - (k - 1 - t) as f64 * 10.0 * dt;
-        }
-    }
-    pf.histories = h;
+    pf.histories = tracks_north(n, k, dt, Enu2::new(600.0, 398.0), 10.0);
     let weights_before = pf.weights().to_vec();
     pf.reroute_at_junctions(&world, &mut rng);
     let heading = |i: usize| pf.track_velocity(i);
@@ -711,15 +716,7 @@ fn particles_at_a_dead_end_turn_back_along_its_road() {
     let mut rng = CoreRng::seed_from_u64(6);
     let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
     let (n, k, dt) = (pf.weights().len(), c.filter.history_len, c.filter_dt_s());
-    let mut h = Histories::new(n, k);
-    for i in 0..n {
-        let tr = h.track_mut(i);
-        for t in 0..k {
-            tr[2 * t] = 500.0;
-            tr[2 * t + 1] = 498.0 - (k - 1 - t) as f64 * 15.0 * dt;
-        }
-    }
-    pf.histories = h;
+    pf.histories = tracks_north(n, k, dt, Enu2::new(500.0, 498.0), 15.0);
     let weights_before = pf.weights().to_vec();
     pf.reroute_at_junctions(&world, &mut rng);
     for i in 0..n {
