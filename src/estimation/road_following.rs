@@ -66,7 +66,9 @@ pub fn straight_track_on_roads<R: Rng + ?Sized>(
 /// belief went on while the car turned back, and was lost for good where it did (random-11,
 /// random-2: BENCHMARKS.md "Field scale, part 43"; parts 26 and 30 measured the same change
 /// on older mains, level or worse, before the searching and road-placement rules of parts
-/// 27-38).
+/// 27-38). It costs field-ring 8.5 points: where the car turns back under an occlusion the
+/// belief now splits between its exits, and EER's search chooses between them worse than the
+/// re-spread corrected the old, wrong belief (part 43).
 pub fn reroute_track<R: Rng + ?Sized>(
     histories: &mut Histories,
     i: usize,
