@@ -85,8 +85,15 @@ pub fn reroute_track<R: Rng + ?Sized>(
     let speed = v.norm();
     let (in_reach, edge_enu) = world.road.reachable_along(&p, Some(v), (0.0, speed * dt_s));
     let all = in_reach.pieces().count();
-    let (ahead, back) = in_reach.clone().split_reversals(&v);
-    let pieces = ahead.pieces().count();
+    // The pieces that go the track's way ([`RoadPieces::split_reversals`]: all of them when
+    // every one runs back), counted without splitting: this runs per particle per step, in
+    // the filter and in EER's rollout, and only the branch taken below needs its pieces.
+    let against_heading = in_reach.reversals(&v);
+    let pieces = if against_heading == all {
+        all
+    } else {
+        all - against_heading
+    };
     // A turn back the graph allows at the node ahead, beside a way on: a piece against the
     // direction of the edge the track drives along (which it goes the way of). A track
     // facing against its edge (a slow one whose noise points back, or one off the road
@@ -107,6 +114,7 @@ pub fn reroute_track<R: Rng + ?Sized>(
         // field-ring's corners).
         let on_road = world.road.distance_to_roads(&p) <= on_road_m;
         if on_road && world.road.heads_into_a_dead_end(&p, Some(v)) {
+            let back = in_reach.split_reversals(&v).1;
             return straight_track_on_roads(histories, i, &back, speed..=speed, dt_s, rng);
         }
     }
@@ -114,5 +122,8 @@ pub fn reroute_track<R: Rng + ?Sized>(
         return straight_track_on_roads(histories, i, &in_reach, speed..=speed, dt_s, rng);
     }
     let follows_its_road = pieces < 2 || (pieces == 2 && step_on_road);
-    !follows_its_road && straight_track_on_roads(histories, i, &ahead, speed..=speed, dt_s, rng)
+    !follows_its_road && {
+        let ahead = in_reach.without_reversals(&v);
+        straight_track_on_roads(histories, i, &ahead, speed..=speed, dt_s, rng)
+    }
 }
