@@ -6,7 +6,7 @@ use crate::estimation::{FilterParams, KalmanParams};
 use crate::guidance::eer::{DEFAULT_CENTRING_SHARE, DEFAULT_SEARCH_COMMITMENT};
 use crate::guidance::{EerParams, GuidanceKind, ReachShape};
 use crate::motion::MotionParams;
-use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams};
+use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams, DEFAULT_CUE_MIN_SPEED_SHARE};
 use crate::world::camera::Footprint;
 use crate::world::geometry::{Enu2, PolygonEnu};
 use crate::world::measurement::{Gaussian2, MeasurementModel};
@@ -93,6 +93,18 @@ impl Config {
         self.acquisition
             .as_ref()
             .map(|a| (Enu2::new(a.cue_enu_m[0], a.cue_enu_m[1]), a.cue_radius_m))
+    }
+
+    /// The speeds the search from the cue gives its hypotheses before the first sighting,
+    /// m/s: from `acquisition.min_speed_mps` (default half the motion model's largest speed)
+    /// to the largest; without a cue, from 0.
+    pub fn cue_speeds_mps(&self) -> std::ops::RangeInclusive<f64> {
+        let v_max = self.motion.cv_max_speed_mps;
+        let min = self.acquisition.as_ref().map_or(0.0, |a| {
+            a.min_speed_mps
+                .unwrap_or(DEFAULT_CUE_MIN_SPEED_SHARE * v_max)
+        });
+        min.min(v_max)..=v_max
     }
 
     /// EER's parameters.
@@ -195,6 +207,7 @@ impl Config {
             lawn: self.guidance.lawn.clone(),
             failsafe: failsafe.then(|| self.failsafe()),
             cue: self.cue_region(),
+            cue_speeds_mps: self.cue_speeds_mps(),
             respread_after_s: Some(self.daemon.target_lost_after_s),
             injection_share: self.filter.hypothesis_injection,
         }

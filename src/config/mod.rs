@@ -134,6 +134,12 @@ pub struct AcquisitionConfig {
     pub cue_enu_m: [f64; 2],
     /// How sure: the target is on a road within this radius of the cue, metres.
     pub cue_radius_m: f64,
+    /// The slowest speed the search from the cue assumes the target drives at, m/s: the
+    /// prior's hypotheses (and the re-spread's until the first sighting) get speeds from
+    /// this to `motion.cv_max_speed_mps`. Absent: half of `motion.cv_max_speed_mps` (a
+    /// cued target is on the move). 0: the target may be standing.
+    #[serde(default)]
+    pub min_speed_mps: Option<f64>,
 }
 
 /// The daemon's settings (`infotrack run`).

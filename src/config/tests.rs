@@ -188,6 +188,20 @@ fn a_cue_outside_the_workspace_or_off_every_road_names_the_key() {
     );
     let e = load(&with("[20.0, 10.0]", "-1.0")).unwrap_err().to_string();
     assert!(e.contains("acquisition.cue_radius_m"), "{e}");
+    // The search's slowest speed: optional, from 0 to the motion model's largest (14 m/s).
+    let cued = |v: &str| format!("{}min_speed_mps = {v}\n", with("[20.0, 10.0]", "150.0"));
+    let speeds = |t: &str| load(t).unwrap().cue_speeds_mps();
+    assert_eq!(speeds(&with("[20.0, 10.0]", "150.0")), 7.0..=14.0);
+    assert_eq!(speeds(&cued("0.0")), 0.0..=14.0);
+    assert_eq!(
+        speeds(&base),
+        0.0..=14.0,
+        "without a cue the lab's prior, from 0"
+    );
+    for bad in ["-1.0", "15.0", "nan"] {
+        let e = load(&cued(bad)).unwrap_err().to_string();
+        assert!(e.contains("acquisition.min_speed_mps"), "{bad}: {e}");
+    }
     // Unknown keys are errors there too.
     let e = load(&format!(
         "{}cue_height_m = 3.0\n",

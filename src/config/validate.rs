@@ -539,6 +539,16 @@ fn validate_acquisition(c: &Config) -> Result<(), ConfigError> {
         return Ok(());
     };
     positive("acquisition.cue_radius_m", a.cue_radius_m)?;
+    if let Some(v) = a.min_speed_mps {
+        let v_max = c.motion.cv_max_speed_mps;
+        if !(v.is_finite() && (0.0..=v_max).contains(&v)) {
+            return Err(invalid(
+                "acquisition.min_speed_mps",
+                v,
+                &format!("must lie in [0, motion.cv_max_speed_mps = {v_max}] m/s"),
+            ));
+        }
+    }
     let cue = Enu2::new(a.cue_enu_m[0], a.cue_enu_m[1]);
     if !(cue.x.is_finite() && cue.y.is_finite() && c.workspace_enu.contains(&cue)) {
         return Err(invalid(

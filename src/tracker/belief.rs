@@ -48,14 +48,17 @@ impl Tracker {
     /// The speeds new hypotheses get: from 0.7 x the speed the target had when last seen
     /// to 1.3 x the fastest it was measured driving over the last [`CRUISE_WINDOW_S`] (a
     /// car keeps its speed through a junction it cannot be seen at, and one last seen
-    /// slowing for a turn drives on at its cruising speed), or any speed the motion model
-    /// allows when it was not moving or never seen.
+    /// slowing for a turn drives on at its cruising speed); never seen, the search from the
+    /// cue's speeds (`TrackerParams::cue_speeds_mps`); seen not moving, any speed the motion
+    /// model allows.
     pub(super) fn hypothesis_speeds(&self) -> std::ops::RangeInclusive<f64> {
         let v_max = self.params.filter.init_speed_max_mps;
         let s = self.last_seen_speed_mps;
         let cruise = self.recent_speeds.iter().map(|(_, v)| *v).fold(s, f64::max);
         if self.last_measurement.is_some() && cruise > 0.1 * v_max {
             (0.7 * s).min(v_max)..=(1.3 * cruise).min(v_max)
+        } else if self.last_measurement.is_none() {
+            self.params.cue_speeds_mps.clone()
         } else {
             0.0..=v_max
         }

@@ -97,6 +97,20 @@ pub struct Failsafe {
     pub guidance_budget_ms: f64,
 }
 
+/// The slowest speed of the search from a cue, as a share of the motion model's largest,
+/// when a config leaves `acquisition.min_speed_mps` out. With speeds uniform from 0 (before
+/// session 47) half the cue's belief was slower than half the largest speed and stayed
+/// near the cue: EER, which values what it can see within its 2 s horizon, hovered over
+/// the cue's junction while the car drove away (random-1 run 0: 107 m behind after 10 s)
+/// and, chasing from behind, its sweep ruled out the slow hypotheses of the road it chased
+/// until the unwatched road's full share looked likelier (it turned back 46 m behind the
+/// car). A cued target is a moving car to be followed; one that is standing is in view
+/// when the drone passes the cue, and an operator who expects a parked target sets the
+/// key to 0. Sixteen random worlds' own seeds: mean FOV +3.1 points, the first sighting's
+/// failures most (random-15 26.9 -> 46.3 %, random-16 33.3 -> 48.2 %); BENCHMARKS.md
+/// "Field scale, part 44".
+pub const DEFAULT_CUE_MIN_SPEED_SHARE: f64 = 0.5;
+
 /// Everything the tracker is built from: each component's own parameters.
 #[derive(Debug, Clone)]
 pub struct TrackerParams {
@@ -119,6 +133,10 @@ pub struct TrackerParams {
     /// The operator's cue (centre, radius, world ENU): the filter starts on the roads
     /// within it; `None`: on the whole road network.
     pub cue: Option<(Enu2, f64)>,
+    /// The speeds, m/s, of the hypotheses drawn before the first sighting: the prior from
+    /// the cue and the re-spreads from its roads (without a cue, the lab's whole-network
+    /// prior, from 0); see [`DEFAULT_CUE_MIN_SPEED_SHARE`].
+    pub cue_speeds_mps: std::ops::RangeInclusive<f64>,
     /// After this long without a measurement, the belief is spread again along the roads
     /// that the target can have reached from where it was last seen (never seen, with a
     /// cue: since the start, from the cue's roads); `None`: never.
@@ -227,6 +245,7 @@ impl Tracker {
                     params.filter.clone(),
                     &world,
                     params.cue,
+                    params.cue_speeds_mps.clone(),
                     &mut rng_filter,
                 )),
                 model: motion::build(name, &params.motion)?,

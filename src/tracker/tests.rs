@@ -232,6 +232,7 @@ fn the_prior_is_on_the_roads_within_the_cue() {
     c.acquisition = Some(crate::config::AcquisitionConfig {
         cue_enu_m: [cue.x, cue.y],
         cue_radius_m: r,
+        min_speed_mps: None,
     });
     let t = tracker(&c, GuidanceKind::Eer, false);
     let pf = t.estimator().particle_filter().unwrap();
@@ -240,13 +241,29 @@ fn the_prior_is_on_the_roads_within_the_cue() {
         assert!(road.distance_to_roads(&p) < 1e-6, "{p} is off the roads");
         assert!((p - cue).norm() <= r + 1e-6, "{p} is outside the cue");
     }
-    // Each particle moves along its road: its history is a straight track on it.
-    let h = pf.histories();
-    let k = h.k_in();
-    for i in 0..h.len() {
-        let v = h.at(i, k - 1) - h.at(i, k - 2);
-        assert!(v.norm() <= c.motion.cv_max_speed_mps / c.timing.filter_hz + 1e-9);
+    // Each particle moves along its road at a speed from half the largest (the default
+    // `acquisition.min_speed_mps`) to the largest.
+    let v_max = c.motion.cv_max_speed_mps;
+    let speeds = |t: &Tracker| {
+        let h = t.estimator().particle_filter().unwrap().histories();
+        let k = h.k_in();
+        (0..h.len())
+            .map(|i| (h.at(i, k - 1) - h.at(i, k - 2)).norm() * c.timing.filter_hz)
+            .collect::<Vec<_>>()
+    };
+    for v in speeds(&t) {
+        assert!((0.5 * v_max - 1e-6..=v_max + 1e-6).contains(&v), "{v} m/s");
     }
+    // An operator who expects a standing target sets 0: speeds from 0.
+    c.acquisition.as_mut().unwrap().min_speed_mps = Some(0.0);
+    let slow = speeds(&tracker(&c, GuidanceKind::Eer, false))
+        .into_iter()
+        .filter(|v| *v < 0.5 * v_max)
+        .count();
+    assert!(
+        slow > 300 && slow < 700,
+        "{slow} of 1000 below half the largest speed"
+    );
     // Without a cue, the whole network: no particle off the roads either.
     c.acquisition = None;
     let t = tracker(&c, GuidanceKind::Eer, false);

@@ -6,15 +6,16 @@ use super::*;
 impl ParticleFilter {
     /// A filter with particles on the roads of `world` within `region` (a centre and a
     /// radius, world ENU; `None`: the whole network), each moving along its road's
-    /// allowed direction at a speed drawn from [0, init_speed_max].
+    /// allowed direction at a speed drawn from `speeds_mps`.
     pub fn on_roads<R: Rng + ?Sized>(
         params: FilterParams,
         world: &World,
         region: Option<(Enu2, f64)>,
+        speeds_mps: std::ops::RangeInclusive<f64>,
         rng: &mut R,
     ) -> Self {
         let mut pf = Self::new(params, world.workspace_enu, rng);
-        pf.spread_on_roads(world, region, rng);
+        pf.spread_on_roads_at(world, region, speeds_mps, rng);
         pf
     }
 

@@ -557,7 +557,8 @@ fn a_search_keeps_to_its_mode_unless_another_is_clearly_better() {
     // the difference between two modes of about equal weight.
     let mut fp = c.filter_params();
     fp.particles = 2000;
-    let mut pf = ParticleFilter::on_roads(fp, &world, None, &mut rng);
+    let speeds = 0.0..=fp.init_speed_max_mps;
+    let mut pf = ParticleFilter::on_roads(fp, &world, None, speeds, &mut rng);
     let mut params = c.eer_params();
     params.entropy_particles = 2000;
     params.entropy_particles_concentrated = 2000;
