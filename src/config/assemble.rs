@@ -3,7 +3,9 @@
 
 use super::{Config, SpeedLimitShape};
 use crate::estimation::{FilterParams, KalmanParams};
-use crate::guidance::eer::{DEFAULT_CENTRING_SHARE, DEFAULT_SEARCH_COMMITMENT};
+use crate::guidance::eer::{
+    DEFAULT_CENTRING_SHARE, DEFAULT_SEARCH_COMMITMENT, DEFAULT_SEARCH_ESCAPE_FLOOR,
+};
 use crate::guidance::{EerParams, GuidanceKind, ReachShape};
 use crate::motion::MotionParams;
 use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams, DEFAULT_CUE_MIN_SPEED_SHARE};
@@ -130,6 +132,7 @@ impl Config {
             intercept_within_s: g.intercept_within_s,
             search_commitment: g.search_commitment.unwrap_or(DEFAULT_SEARCH_COMMITMENT),
             centring_share: g.centring_share.unwrap_or(DEFAULT_CENTRING_SHARE),
+            search_escape_floor: g.search_escape_floor.unwrap_or(DEFAULT_SEARCH_ESCAPE_FLOOR),
         }
     }
 

@@ -543,6 +543,14 @@ pub struct GuidanceConfig {
     /// ties only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub centring_share: Option<f64>,
+    /// The search from a cue, before the first sighting: each hypothesis's weight in EER is
+    /// multiplied by `floor + (1 - floor) x` its speed away from the drone over the fastest
+    /// hypothesis's, so that the plan looks first where the belief escapes (one coming
+    /// toward the drone can be looked at later); this is the floor, in [0, 1]. A departure
+    /// from the paper's weights (BENCHMARKS "Field scale, part 45"). Optional; absent, 0.1;
+    /// 1 restores the paper's. Without a cue (the lab), never applied.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub search_escape_floor: Option<f64>,
     /// The lawnmower sweep.
     pub lawn: LawnConfig,
 }

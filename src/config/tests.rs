@@ -331,15 +331,16 @@ fn the_agent_speed_limit_shape_is_optional_and_a_bad_one_is_named() {
     );
 }
 
-/// `guidance.search_commitment` (absent: 0.2) and `guidance.centring_share` (absent: 0.02)
-/// are optional, a share in [0, 1] is passed to EER as given, and one outside it (or NaN) is
-/// an error naming the key.
+/// `guidance.search_commitment` (absent: 0.2), `guidance.centring_share` (absent: 0.02) and
+/// `guidance.search_escape_floor` (absent: 0.1) are optional, a share in [0, 1] is passed to
+/// EER as given, and one outside it (or NaN) is an error naming the key.
 #[test]
 fn the_eer_shares_are_optional_and_a_bad_one_is_named() {
     type Share = fn(&crate::guidance::eer::EerParams) -> f64;
-    let keys: [(&str, f64, Share); 2] = [
+    let keys: [(&str, f64, Share); 3] = [
         ("search_commitment", 0.2, |p| p.search_commitment),
         ("centring_share", 0.02, |p| p.centring_share),
+        ("search_escape_floor", 0.1, |p| p.search_escape_floor),
     ];
     let c = Config::default_lab();
     assert_eq!(c.guidance.search_commitment, None);

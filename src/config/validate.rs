@@ -257,6 +257,9 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
             ));
         }
     }
+    if let Some(floor) = g.search_escape_floor {
+        in_unit("guidance.search_escape_floor", floor)?;
+    }
     let l = &g.lawn;
     if l.legs_x_m.is_empty() {
         return Err(invalid(

@@ -39,7 +39,9 @@
 use rand::Rng;
 
 mod commitment;
+mod escape;
 pub use commitment::{committed_choice, Centring};
+pub use escape::{speed_away_mps, weigh_by_escape, DEFAULT_SEARCH_ESCAPE_FLOOR};
 
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
 use crate::estimation::{road_following, ParticleFilter};
@@ -96,6 +98,11 @@ pub struct EerParams {
     /// Without a previous waypoint to keep to, the share of the EER range below the best within which the candidate
     /// nearest the belief's predicted mean is taken ([`Centring`]); 0: exact ties only.
     pub centring_share: f64,
+    /// While searching from a cue, never having seen the target
+    /// ([`EerPlanner::weigh_escape`]), the weight in [0, 1] of a hypothesis that is not
+    /// driving away from the agent relative to one driving away at the fastest speed
+    /// ([`weigh_by_escape`]); 1: the paper's weights.
+    pub search_escape_floor: f64,
 }
 
 /// Everything the evaluation needs, after the rollout: pure data.
@@ -572,6 +579,7 @@ pub struct EerPlanner {
     rollout_on_roads_m: Option<f64>,
     searching: bool,
     last_waypoint_enu: Option<Enu2>,
+    escape_weighting: bool,
 }
 
 impl EerPlanner {
@@ -599,6 +607,13 @@ impl EerPlanner {
         self.searching = on;
     }
 
+    /// Whether the plan weighs the hypotheses by how fast they drive away from the agent
+    /// ([`weigh_by_escape`], `search_escape_floor`): the tracker turns it on while the search
+    /// from a cue has not yet seen the target.
+    pub fn weigh_escape(&mut self, on: bool) {
+        self.escape_weighting = on;
+    }
+
     /// A planner with these parameters.
     pub fn new(params: EerParams) -> Self {
         Self {
@@ -612,6 +627,7 @@ impl EerPlanner {
             rollout_on_roads_m: None,
             searching: false,
             last_waypoint_enu: None,
+            escape_weighting: false,
         }
     }
 
@@ -704,6 +720,9 @@ impl EerPlanner {
 
     /// Steps 3 and 4: candidates, EER of each, argmax. No motion-model calls.
     pub fn decide(&mut self, agent_enu: &Enu2, world: &World) -> EerDecision {
+        if self.escape_weighting {
+            weigh_by_escape(&mut self.inputs, agent_enu, self.params.search_escape_floor);
+        }
         let p = &self.params;
         let mut cands = candidates(
             &self.inputs,

@@ -146,6 +146,8 @@ impl Tracker {
             });
         };
         self.planner.use_intercepts(self.last_measurement.is_some());
+        self.planner
+            .weigh_escape(self.last_measurement.is_none() && self.params.cue.is_some());
         self.planner.set_searching(searching);
         // EER plans with the prediction the filter makes: where the filter re-routes its
         // belief at junctions, so does the rollout. Straight on, the predicted tracks ran

@@ -616,3 +616,41 @@ fn a_search_keeps_to_its_mode_unless_another_is_clearly_better() {
     let d = plan(&mut seen, &mut pf, (0.1, 0.5));
     assert!(near(&d, north), "{}", d.waypoint_enu);
 }
+
+#[test]
+fn the_escape_weighting_applies_only_when_the_tracker_turns_it_on() {
+    let c = outdoor();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(5);
+    let fp = c.filter_params();
+    let speeds = 0.0..=fp.init_speed_max_mps;
+    let pf = ParticleFilter::on_roads(fp, &world, None, speeds, &mut rng);
+    let mut model = ConstantVelocity::new(c.motion.cv_max_speed_mps, c.filter_dt_s());
+    let agent = Enu2::new(300.0, 400.0);
+    let params = c.eer_params();
+    assert_eq!(params.search_escape_floor, DEFAULT_SEARCH_ESCAPE_FLOOR);
+    for on in [false, true] {
+        let mut planner = EerPlanner::new(params.clone());
+        planner.weigh_escape(on);
+        let mut expected = planner
+            .prepare(&pf, &mut model, &world, &mut CoreRng::seed_from_u64(9))
+            .unwrap()
+            .clone();
+        if on {
+            weigh_by_escape(&mut expected, &agent, params.search_escape_floor);
+        }
+        planner.decide(&agent, &world);
+        assert_eq!(planner.inputs().weights, expected.weights, "on = {on}");
+        assert_eq!(planner.inputs().alpha, expected.alpha, "on = {on}");
+    }
+    // The weighting moved something: the hypotheses are not all equally escaping.
+    let mut weighed = EerPlanner::new(params.clone());
+    weighed.weigh_escape(true);
+    let before = weighed
+        .prepare(&pf, &mut model, &world, &mut CoreRng::seed_from_u64(9))
+        .unwrap()
+        .weights
+        .clone();
+    weighed.decide(&agent, &world);
+    assert_ne!(weighed.inputs().weights, before);
+}
