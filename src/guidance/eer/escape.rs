@@ -53,9 +53,16 @@ pub fn weigh_by_escape(inputs: &mut EerInputs, agent_enu: &Enu2, floor: f64) {
     for (w, f) in inputs.weights.iter_mut().zip(&factors) {
         *w *= f / total;
     }
+    // alpha_jm is proportional to w_j times a likelihood, so it takes the same factor, but
+    // its own sum (not the weights') renormalises it: eq. 13's expectation needs it to sum
+    // to 1 (the evaluation weighs the missed detection by 1 - the alpha in view).
     let n_m = inputs.n_m.max(1);
     for (j, a) in inputs.alpha.iter_mut().enumerate() {
-        *a *= factors[j / n_m] / total;
+        *a *= factors[j / n_m];
+    }
+    let alpha_total: f64 = inputs.alpha.iter().sum();
+    if alpha_total > 0.0 && alpha_total.is_finite() {
+        inputs.alpha.iter_mut().for_each(|a| *a /= alpha_total);
     }
 }
 
@@ -144,6 +151,20 @@ mod tests {
             (inp.alpha[0] / inp.alpha[2] - 10.0).abs() < 1e-9,
             "{:?}",
             inp.alpha
+        );
+        // Expectation weights that do not add up to each hypothesis's weight (likelihoods
+        // differ per measurement) still sum to 1 after the weighting.
+        let mut uneven = two_ways();
+        uneven.n_m = 2;
+        uneven.measurements = vec![Enu2::new(100.0, 0.0); 4];
+        uneven.alpha = vec![0.4, 0.3, 0.2, 0.1];
+        weigh_by_escape(&mut uneven, &Enu2::zeros(), 0.1);
+        let sum: f64 = uneven.alpha.iter().sum();
+        assert!((sum - 1.0).abs() < 1e-12, "{:?}", uneven.alpha);
+        assert!(
+            (uneven.alpha[0] / uneven.alpha[2] - 20.0).abs() < 1e-9,
+            "{:?}",
+            uneven.alpha
         );
     }
 
