@@ -107,6 +107,33 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
     let count = |f: fn(&MavMessage) -> bool| msgs.iter().filter(|(_, _, m)| f(m)).count();
     let setpoints = count(|m| matches!(m, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_)));
     assert!(setpoints as f64 >= 10.0 * 90.0, "{setpoints} setpoints");
+    // Every setpoint holds the heading the tracker's footprint is drawn for: the nose north
+    // (NED yaw 0), the image's width along world east. Yaw ENU 0 (the nose east, sent
+    // before session 48) turned a real camera's view across the model's.
+    let yaws: Vec<f32> = msgs
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(s) => Some(s.yaw),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        yaws.iter().all(|y| y.abs() < 1e-6),
+        "setpoint yaws (NED) not all 0: {:?}",
+        yaws.iter().find(|y| y.abs() >= 1e-6)
+    );
+    let attitude_yaws: Vec<f32> = msgs
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            MavMessage::ATTITUDE(a) => Some(a.yaw),
+            _ => None,
+        })
+        .collect();
+    assert!(!attitude_yaws.is_empty());
+    assert!(
+        attitude_yaws.last().unwrap().abs() < 1e-3,
+        "{attitude_yaws:?}"
+    );
     // Simulated time in the log: 90 s of time stamps, however fast it flew.
     let span_s = (msgs.last().unwrap().0 - msgs[0].0) as f64 * 1e-6;
     assert!(span_s > 90.0 && span_s < 100.0, "tlog spans {span_s} s");

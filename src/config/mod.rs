@@ -159,7 +159,8 @@ pub struct DaemonConfig {
     /// image_width, image_height); its size is requested from the camera.
     pub calibration: Option<PathBuf>,
     /// The camera's tilt from looking straight down with the image top to the nose: roll,
-    /// pitch, yaw in body FRD, rad.
+    /// pitch, yaw in body FRD, rad. The vehicle flies with its nose at minus this yaw from
+    /// north, so that the image's axes lie along the world's as the tracker models them.
     pub camera_mount_rpy_rad: [f64; 3],
     /// Camera centre in body FRD, m.
     pub camera_offset_body_frd_m: [f64; 3],

@@ -22,6 +22,7 @@ mod airborne;
 pub mod engagement;
 pub mod flight_log;
 pub mod gcs_report;
+pub mod heading;
 mod options;
 pub mod pipeline;
 pub mod pose_history;

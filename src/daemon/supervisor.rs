@@ -193,6 +193,7 @@ impl Supervisor<'_> {
     /// it does not have it streams what the firmware needs to let the pilot hand over (PX4:
     /// the vehicle's own position) or nothing (ArduPilot).
     async fn follow_pilot(&mut self) {
+        let yaw = self.view_yaw_enu_rad();
         let link = &self.vehicle.link;
         let mode = link.state().mode;
         match self.engagement.update(mode) {
@@ -223,7 +224,7 @@ impl Supervisor<'_> {
                 // Outside the geofence nothing can be streamed; OFFBOARD then cannot be
                 // entered, which is what the fence is for.
                 engagement::IdleStream::HoldHere => match link.position_enu() {
-                    Some(here) => link.set_setpoint(here, 0.0).is_err(),
+                    Some(here) => link.set_setpoint(here, yaw).is_err(),
                     None => true,
                 },
             };
@@ -234,6 +235,12 @@ impl Supervisor<'_> {
             link.pause_setpoints(paused);
             self.paused = paused;
         }
+    }
+
+    /// The yaw every setpoint carries, world ENU: the heading the tracker's footprint is
+    /// drawn for, the camera's mount yaw accounted for ([`heading::view_yaw_enu_rad`]).
+    fn view_yaw_enu_rad(&self) -> f64 {
+        heading::view_yaw_enu_rad(self.cfg.daemon.camera_mount_rpy_rad[2])
     }
 
     /// Sends the pipeline's newest command as a setpoint (inside the geofence).
@@ -252,7 +259,11 @@ impl Supervisor<'_> {
             };
             if let Some((w, v)) = target {
                 let p = PositionEnu::from_xy(&w, self.cfg.agent.altitude_m);
-                if let Err(e) = self.vehicle.link.set_moving_setpoint(p, v, 0.0) {
+                if let Err(e) = self
+                    .vehicle
+                    .link
+                    .set_moving_setpoint(p, v, self.view_yaw_enu_rad())
+                {
                     self.geofence_refusals += 1;
                     tracing::warn!("{e}");
                 }

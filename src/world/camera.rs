@@ -2,8 +2,16 @@
 
 use super::geometry::Enu2;
 
+/// The heading the footprint is drawn for, NED yaw (rad, from north toward east): the nose
+/// north. The nadir camera's image width (camera x, body right) then lies along world east
+/// (the footprint's `half_width_m`) and its height along world north. A vehicle must hold
+/// this heading (its camera turned by the mount's yaw accounted for) for the tracker's model
+/// of what the camera sees, the negative information of every missed detection, to be true.
+pub const FOOTPRINT_YAW_NED_RAD: f64 = 0.0;
+
 /// The rectangle a nadir-pointing camera sees on flat ground, centred under the agent and
-/// aligned with the world axes (the agent holds a constant heading, as in the paper).
+/// aligned with the world axes (the agent holds a constant heading, as in the paper:
+/// [`FOOTPRINT_YAW_NED_RAD`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Footprint {
     /// Half width along world x, metres.

@@ -133,6 +133,14 @@ impl VehicleLink {
         Ok(())
     }
 
+    /// The vehicle's heading from its last ATTITUDE, world ENU rad (the nose north when none
+    /// has come): a climb or a hold keeps the heading the vehicle has rather than turning it
+    /// (yaw ENU 0 did: the nose east, whatever the pilot or the tracker had set).
+    pub fn heading_enu_rad(&self) -> f64 {
+        let yaw_ned = self.state().attitude.map_or(0.0, |(_, a)| f64::from(a[2]));
+        yaw_ned_to_enu(if yaw_ned.is_finite() { yaw_ned } else { 0.0 })
+    }
+
     /// Takes off to `altitude_m` above the origin and enters the tracking mode, as each
     /// firmware wants it:
     /// * PX4: stream setpoints (here, at altitude) for more than 1 s, then OFFBOARD, then arm;
@@ -151,7 +159,7 @@ impl VehicleLink {
         };
         match self.flavor() {
             Flavor::Px4 => {
-                self.set_setpoint(above, 0.0)?;
+                self.set_setpoint(above, self.heading_enu_rad())?;
                 tokio::time::sleep(Duration::from_millis(1200)).await;
                 self.set_mode(Mode::Offboard).await?;
                 self.arm_when_ready(timeout).await?;
@@ -176,7 +184,7 @@ impl VehicleLink {
         };
         self.climb_to(altitude_m, climb_mode, timeout).await?;
         if self.flavor() == Flavor::ArduPilot {
-            self.set_setpoint(above, 0.0)?;
+            self.set_setpoint(above, self.heading_enu_rad())?;
         }
         Ok(())
     }
@@ -244,7 +252,7 @@ impl VehicleLink {
         if r.is_err() && flavor == Flavor::ArduPilot {
             // BRAKE refused: GUIDED at the current position also holds altitude without RC.
             if let Some(p) = self.position_enu() {
-                self.set_setpoint(p, 0.0)?;
+                self.set_setpoint(p, self.heading_enu_rad())?;
                 return self.set_mode(Mode::Guided).await;
             }
         }

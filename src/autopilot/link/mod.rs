@@ -23,7 +23,7 @@ use super::modes::{Flavor, Mode};
 use super::params_file::{decode_wire, encode_wire, ParamType};
 use super::params_file::{mav_param_type_of, param_type_of};
 use super::signing::SigningKey;
-use crate::frames::{yaw_enu_to_ned, Enu2, PositionEnu, PositionNed};
+use crate::frames::{yaw_enu_to_ned, yaw_ned_to_enu, Enu2, PositionEnu, PositionNed};
 use crate::geodesy::WorldPlacement;
 use crate::world::geometry::BoundsEnu;
 

@@ -1,0 +1,84 @@
+//! The heading the daemon flies: the one the tracker's footprint is drawn for.
+//!
+//! The tracker models the camera's view as the world-aligned rectangle of
+//! [`Footprint`](crate::world::camera::Footprint), which is what a nadir camera sees with the
+//! nose north ([`FOOTPRINT_YAW_NED_RAD`]). Until session 48 every setpoint carried yaw ENU 0
+//! (the nose east): on a real vehicle the image's long side then lay north-south while the
+//! model held it east-west, and a missed detection removed hypotheses the camera had not
+//! looked at (the synthetic camera renders with the model's heading, so no simulation
+//! showed it). A camera turned on its mount by yaw psi (`daemon.camera_mount_rpy_rad`) is
+//! aligned by flying the nose at -psi.
+
+use crate::frames::yaw_ned_to_enu;
+use crate::world::camera::FOOTPRINT_YAW_NED_RAD;
+
+/// The yaw every setpoint carries, world ENU rad, for a camera turned on its mount by
+/// `mount_yaw_body_rad` (body FRD, about the body's z axis): the vehicle heading at which the
+/// camera's image axes lie along the world's as the footprint model has them.
+pub fn view_yaw_enu_rad(mount_yaw_body_rad: f64) -> f64 {
+    yaw_ned_to_enu(FOOTPRINT_YAW_NED_RAD - mount_yaw_body_rad)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frames::{yaw_enu_to_ned, VehiclePoseNed};
+    use crate::vision::camera_model::{CameraModel, CameraMount, Intrinsics};
+    use crate::world::camera::Footprint;
+    use crate::world::geometry::Enu2;
+
+    const ALTITUDE_M: f64 = 45.0;
+    const FOV_X_RAD: f64 = 1.14;
+
+    /// The ground points (world ENU, relative to the vehicle) of the image's right-edge
+    /// centre and top-edge centre, for a vehicle at `yaw_enu_rad`.
+    fn image_edges_on_ground(mount_yaw: f64, yaw_enu_rad: f64) -> (Enu2, Enu2) {
+        let intrinsics = Intrinsics::ideal(1280, 720, FOV_X_RAD);
+        let cam = CameraModel {
+            intrinsics: intrinsics.clone(),
+            mount: CameraMount::from_angles(0.0, 0.0, mount_yaw, [0.0; 3]),
+        };
+        let at = Enu2::new(120.0, -40.0);
+        let mut pose = VehiclePoseNed::level_above(&at, ALTITUDE_M);
+        pose.yaw_rad = yaw_enu_to_ned(yaw_enu_rad);
+        let ground = |u: f64, v: f64| {
+            let g = cam.pixel_to_ground_enu(u, v, &pose).expect("looks down");
+            Enu2::new(g[0], g[1]) - at
+        };
+        let w = intrinsics.width_px as f64;
+        (
+            ground(w - 0.5, intrinsics.cy_px),
+            ground(intrinsics.cx_px, -0.5),
+        )
+    }
+
+    #[test]
+    fn at_the_flown_heading_the_image_lies_as_the_footprint_model_has_it() {
+        let fov_y = 2.0 * ((720.0 / 1280.0) * (0.5 * FOV_X_RAD).tan()).atan();
+        let fp = Footprint::from_fov(ALTITUDE_M, FOV_X_RAD, fov_y);
+        for mount_yaw in [0.0, 0.3, std::f64::consts::FRAC_PI_2, -2.0] {
+            let (right, top) = image_edges_on_ground(mount_yaw, view_yaw_enu_rad(mount_yaw));
+            // The image's right edge: east, at the footprint's half width.
+            assert!(
+                (right.x - fp.half_width_m).abs() < 0.05,
+                "{mount_yaw}: {right:?}"
+            );
+            assert!(right.y.abs() < 0.05, "{mount_yaw}: {right:?}");
+            // Its top edge: north, at the footprint's half height.
+            assert!(
+                (top.y - fp.half_height_m).abs() < 0.05,
+                "{mount_yaw}: {top:?}"
+            );
+            assert!(top.x.abs() < 0.05, "{mount_yaw}: {top:?}");
+        }
+    }
+
+    #[test]
+    fn the_old_heading_east_turned_the_image_across_the_model() {
+        // Yaw ENU 0, what every setpoint carried before: the image's right edge falls south.
+        let (right, top) = image_edges_on_ground(0.0, 0.0);
+        assert!(right.y < -20.0 && right.x.abs() < 0.05, "{right:?}");
+        assert!(top.x > 10.0, "{top:?}");
+        assert!((view_yaw_enu_rad(0.0) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+}
