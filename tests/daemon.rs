@@ -616,7 +616,8 @@ async fn a_real_camera_source_is_projected_with_the_pose_at_capture_time() {
     use infotrack::vision::{cv_io, tag_family::TagBitmap};
     use opencv::prelude::*;
     // A camera that films a tag at (0.1, 0.15) m ENU from where the vehicle will hover:
-    // (0, 0) at the agent's 1.2 m, nose east (PX4 holds the yaw of the setpoints, ENU 0).
+    // (0, 0) at the agent's 1.2 m, nose north (the vehicle holds the setpoints' yaw, the
+    // heading the footprint model is drawn for: NED 0).
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = lab();
     let intr = Intrinsics::ideal(640, 480, cfg.camera.fov_x_rad);
@@ -630,7 +631,7 @@ async fn a_real_camera_source_is_projected_with_the_pose_at_capture_time() {
         position_ned_m: [0.0, 0.0, -cfg.agent.altitude_m],
         roll_rad: 0.0,
         pitch_rad: 0.0,
-        yaw_rad: std::f64::consts::FRAC_PI_2,
+        yaw_rad: 0.0,
     };
     let tag = [0.1, 0.15];
     let scene = SceneEnu {
