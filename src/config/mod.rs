@@ -548,8 +548,8 @@ pub struct GuidanceConfig {
     /// multiplied by `floor + (1 - floor) x` its speed away from the drone over the fastest
     /// hypothesis's, so that the plan looks first where the belief escapes (one coming
     /// toward the drone can be looked at later); this is the floor, in [0, 1]. A departure
-    /// from the paper's weights (BENCHMARKS "Field scale, part 45"). Optional; absent, 0.1;
-    /// 1 restores the paper's. Without a cue (the lab), never applied.
+    /// from the paper's weights (BENCHMARKS "Field scale, part 45"). Optional; absent, 0.3
+    /// (0.1 before session 48, part 46); 1 restores the paper's. Without a cue (the lab), never applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_escape_floor: Option<f64>,
     /// The lawnmower sweep.

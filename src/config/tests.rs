@@ -332,7 +332,7 @@ fn the_agent_speed_limit_shape_is_optional_and_a_bad_one_is_named() {
 }
 
 /// `guidance.search_commitment` (absent: 0.2), `guidance.centring_share` (absent: 0.02) and
-/// `guidance.search_escape_floor` (absent: 0.1) are optional, a share in [0, 1] is passed to
+/// `guidance.search_escape_floor` (absent: 0.3) are optional, a share in [0, 1] is passed to
 /// EER as given, and one outside it (or NaN) is an error naming the key.
 #[test]
 fn the_eer_shares_are_optional_and_a_bad_one_is_named() {
@@ -340,7 +340,7 @@ fn the_eer_shares_are_optional_and_a_bad_one_is_named() {
     let keys: [(&str, f64, Share); 3] = [
         ("search_commitment", 0.2, |p| p.search_commitment),
         ("centring_share", 0.02, |p| p.centring_share),
-        ("search_escape_floor", 0.1, |p| p.search_escape_floor),
+        ("search_escape_floor", 0.3, |p| p.search_escape_floor),
     ];
     let c = Config::default_lab();
     assert_eq!(c.guidance.search_commitment, None);
