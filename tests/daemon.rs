@@ -110,25 +110,22 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
     // Every setpoint holds the heading the tracker's footprint is drawn for: the nose north
     // (NED yaw 0), the image's width along world east. Yaw ENU 0 (the nose east, sent
     // before session 48) turned a real camera's view across the model's.
-    let yaws: Vec<f32> = msgs
-        .iter()
-        .filter_map(|(_, _, m)| match m {
-            MavMessage::SET_POSITION_TARGET_LOCAL_NED(s) => Some(s.yaw),
-            _ => None,
-        })
-        .collect();
+    let yaws_in = |yaw_of: fn(&MavMessage) -> Option<f32>| -> Vec<f32> {
+        msgs.iter().filter_map(|(_, _, m)| yaw_of(m)).collect()
+    };
+    let yaws = yaws_in(|m| match m {
+        MavMessage::SET_POSITION_TARGET_LOCAL_NED(s) => Some(s.yaw),
+        _ => None,
+    });
     assert!(
         yaws.iter().all(|y| y.abs() < 1e-6),
         "setpoint yaws (NED) not all 0: {:?}",
         yaws.iter().find(|y| y.abs() >= 1e-6)
     );
-    let attitude_yaws: Vec<f32> = msgs
-        .iter()
-        .filter_map(|(_, _, m)| match m {
-            MavMessage::ATTITUDE(a) => Some(a.yaw),
-            _ => None,
-        })
-        .collect();
+    let attitude_yaws = yaws_in(|m| match m {
+        MavMessage::ATTITUDE(a) => Some(a.yaw),
+        _ => None,
+    });
     assert!(!attitude_yaws.is_empty());
     assert!(
         attitude_yaws.last().unwrap().abs() < 1e-3,

@@ -9,8 +9,15 @@
 //! showed it). A camera turned on its mount by yaw psi (`daemon.camera_mount_rpy_rad`) is
 //! aligned by flying the nose at -psi.
 
+use crate::config::Config;
 use crate::frames::yaw_ned_to_enu;
 use crate::world::camera::FOOTPRINT_YAW_NED_RAD;
+
+/// The yaw every setpoint of this config's flight carries, world ENU rad: the footprint's
+/// heading for its camera's mount yaw (`daemon.camera_mount_rpy_rad`).
+pub fn flown_yaw_enu_rad(cfg: &Config) -> f64 {
+    view_yaw_enu_rad(cfg.daemon.camera_mount_rpy_rad[2])
+}
 
 /// The yaw every setpoint carries, world ENU rad, for a camera turned on its mount by
 /// `mount_yaw_body_rad` (body FRD, about the body's z axis): the vehicle heading at which the

@@ -193,7 +193,7 @@ impl Supervisor<'_> {
     /// it does not have it streams what the firmware needs to let the pilot hand over (PX4:
     /// the vehicle's own position) or nothing (ArduPilot).
     async fn follow_pilot(&mut self) {
-        let yaw = self.view_yaw_enu_rad();
+        let yaw = heading::flown_yaw_enu_rad(self.cfg);
         let link = &self.vehicle.link;
         let mode = link.state().mode;
         match self.engagement.update(mode) {
@@ -237,12 +237,6 @@ impl Supervisor<'_> {
         }
     }
 
-    /// The yaw every setpoint carries, world ENU: the heading the tracker's footprint is
-    /// drawn for, the camera's mount yaw accounted for ([`heading::view_yaw_enu_rad`]).
-    fn view_yaw_enu_rad(&self) -> f64 {
-        heading::view_yaw_enu_rad(self.cfg.daemon.camera_mount_rpy_rad[2])
-    }
-
     /// Sends the pipeline's newest command as a setpoint (inside the geofence).
     fn apply_command(&mut self, snap: Option<VehicleSnapshot>) {
         let cmd = self.shared.pipeline_view().command;
@@ -259,11 +253,8 @@ impl Supervisor<'_> {
             };
             if let Some((w, v)) = target {
                 let p = PositionEnu::from_xy(&w, self.cfg.agent.altitude_m);
-                if let Err(e) = self
-                    .vehicle
-                    .link
-                    .set_moving_setpoint(p, v, self.view_yaw_enu_rad())
-                {
+                let yaw = heading::flown_yaw_enu_rad(self.cfg);
+                if let Err(e) = self.vehicle.link.set_moving_setpoint(p, v, yaw) {
                     self.geofence_refusals += 1;
                     tracing::warn!("{e}");
                 }
