@@ -6,7 +6,7 @@ use crate::estimation::{FilterParams, KalmanParams};
 use crate::guidance::eer::{
     DEFAULT_CENTRING_SHARE, DEFAULT_SEARCH_COMMITMENT, DEFAULT_SEARCH_ESCAPE_FLOOR,
 };
-use crate::guidance::{EerParams, GuidanceKind, ReachShape};
+use crate::guidance::{EerParams, GuidanceKind, HeadingRule, ReachShape, ViewHeading};
 use crate::motion::MotionParams;
 use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams, DEFAULT_CUE_MIN_SPEED_SHARE};
 use crate::world::camera::Footprint;
@@ -23,12 +23,17 @@ impl Config {
             self.workspace_enu,
             &self.road,
             self.occlusion_polygons(),
-            Footprint::from_fov(
-                self.agent.altitude_m,
-                self.camera.fov_x_rad,
-                self.camera.fov_y_rad,
-            ),
+            self.footprint(),
             MeasurementModel::new(self.measurement.noise_cov_m2),
+        )
+    }
+
+    /// The camera's footprint at the tracking altitude.
+    pub fn footprint(&self) -> Footprint {
+        Footprint::from_fov(
+            self.agent.altitude_m,
+            self.camera.fov_x_rad,
+            self.camera.fov_y_rad,
         )
     }
 
@@ -197,12 +202,22 @@ impl Config {
         }
     }
 
+    /// Which way the view turns (`guidance.view_heading`): a hover within a quarter view of
+    /// its setpoint keeps its heading.
+    pub fn heading_rule(&self) -> HeadingRule {
+        HeadingRule {
+            kind: self.guidance.view_heading.unwrap_or(ViewHeading::North),
+            settle_m: self.footprint().quarter_view_m(),
+        }
+    }
+
     /// Everything the tracker is built from, for a guidance law, with or without the
     /// daemon's failsafes.
     pub fn tracker_params(&self, guidance: GuidanceKind, failsafe: bool) -> TrackerParams {
         TrackerParams {
             rates: self.rates(),
             guidance,
+            heading: self.heading_rule(),
             filter: self.filter_params(),
             kalman: self.kalman_params(),
             motion: self.motion_params(),

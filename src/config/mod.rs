@@ -368,6 +368,23 @@ pub struct AgentConfig {
     /// it: a square of half width `reach` for `per_axis`, a disc of that radius for `norm`.
     #[serde(default)]
     pub speed_limit_shape: SpeedLimitShape,
+    /// How fast the simulator's agent turns to a new heading, rad/s (the mock autopilot
+    /// slews its yaw at the same rate). Optional; absent, 45 deg/s, PX4's MPC_YAWRAUTO_MAX
+    /// default (ArduCopter's ATC_SLEW_YAW default is 60 deg/s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yaw_rate_limit_rad_s: Option<f64>,
+}
+
+/// The simulator's and the mock's turn rate when `agent.yaw_rate_limit_rad_s` is absent,
+/// rad/s: PX4's MPC_YAWRAUTO_MAX default, 45 deg/s.
+pub const DEFAULT_YAW_RATE_LIMIT_RAD_S: f64 = std::f64::consts::FRAC_PI_4;
+
+impl AgentConfig {
+    /// The turn rate, rad/s (`yaw_rate_limit_rad_s` or its default).
+    pub fn yaw_rate_limit_rad_s(&self) -> f64 {
+        self.yaw_rate_limit_rad_s
+            .unwrap_or(DEFAULT_YAW_RATE_LIMIT_RAD_S)
+    }
 }
 
 /// How the simulator's agent limits its horizontal speed (`agent.speed_limit_shape`).
@@ -552,6 +569,14 @@ pub struct GuidanceConfig {
     /// (0.1 before session 48, part 46); 1 restores the paper's. Without a cue (the lab), never applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_escape_floor: Option<f64>,
+    /// Which way the camera's image faces: `north` (the paper's constant heading, the image's
+    /// width along world east) or `along_track` (the image's width, its long side, along the
+    /// direction of travel, a chased car's road; the vehicle turns at
+    /// `agent.yaw_rate_limit_rad_s`, and EER judges each candidate at the heading the vehicle
+    /// will have there). Level with `north` on average over the field worlds measured
+    /// (BENCHMARKS "Field scale, part 47"). Optional; absent, `north`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view_heading: Option<crate::guidance::ViewHeading>,
     /// The lawnmower sweep.
     pub lawn: LawnConfig,
 }

@@ -41,6 +41,8 @@ pub struct LoggedStep {
     pub t_s: f64,
     /// Vehicle position, world ENU, m.
     pub vehicle_enu: Enu2,
+    /// Vehicle heading, local NED yaw (rad): the camera's view faces it turned by the mount.
+    pub vehicle_yaw_ned_rad: f64,
     /// Whether a camera frame was taken (false: the camera gave nothing).
     pub frame: bool,
     /// The measurement, world ENU, m.
@@ -212,6 +214,7 @@ fn parse_row(
             }
             .to_enu()
             .xy(),
+            vehicle_yaw_ned_rad: num(6)?,
             frame: flag(7)?,
             measurement_enu: measured.then_some(z),
             estimate_enu: Enu2::new(num(11)?, num(12)?),

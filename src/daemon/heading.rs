@@ -1,5 +1,10 @@
 //! The heading the daemon flies: the one the tracker's footprint is drawn for.
 //!
+//! The tracker thinks in the camera's view ([`View`]: which way its image's top faces); the
+//! vehicle flies its nose. A camera turned on its mount by yaw psi faces the nose's heading
+//! plus psi ([`view_yaw_enu_of_nose`]); to face a view, the nose flies it less psi
+//! ([`nose_yaw_enu_for_view`]).
+//!
 //! The tracker models the camera's view as the world-aligned rectangle of
 //! [`Footprint`](crate::world::camera::Footprint), which is what a nadir camera sees with the
 //! nose north ([`FOOTPRINT_YAW_NED_RAD`]). Until session 48 every setpoint carried yaw ENU 0
@@ -10,8 +15,21 @@
 //! aligned by flying the nose at -psi.
 
 use crate::config::Config;
-use crate::frames::yaw_ned_to_enu;
+use crate::frames::{yaw_enu_to_ned, yaw_ned_to_enu};
 use crate::world::camera::FOOTPRINT_YAW_NED_RAD;
+
+/// The heading the camera's image faces, world ENU yaw (rad, [`View::yaw_enu_rad`]), on a
+/// vehicle whose nose is at `nose_yaw_ned_rad` (local NED, ATTITUDE's yaw) with its camera
+/// turned on its mount by `mount_yaw_body_rad`.
+pub fn view_yaw_enu_of_nose(nose_yaw_ned_rad: f64, mount_yaw_body_rad: f64) -> f64 {
+    yaw_ned_to_enu(nose_yaw_ned_rad + mount_yaw_body_rad)
+}
+
+/// The nose's heading, world ENU yaw (rad, what a setpoint carries), at which a camera turned
+/// on its mount by `mount_yaw_body_rad` faces `view_yaw_enu_rad`.
+pub fn nose_yaw_enu_for_view(view_yaw_enu_rad: f64, mount_yaw_body_rad: f64) -> f64 {
+    yaw_ned_to_enu(yaw_enu_to_ned(view_yaw_enu_rad) - mount_yaw_body_rad)
+}
 
 /// The yaw every setpoint of this config's flight carries, world ENU rad: the footprint's
 /// heading for its camera's mount yaw (`daemon.camera_mount_rpy_rad`).
@@ -31,7 +49,7 @@ mod tests {
     use super::*;
     use crate::frames::{yaw_enu_to_ned, VehiclePoseNed};
     use crate::vision::camera_model::{CameraModel, CameraMount, Intrinsics};
-    use crate::world::camera::Footprint;
+    use crate::world::camera::{Footprint, View};
     use crate::world::geometry::Enu2;
 
     const ALTITUDE_M: f64 = 45.0;
@@ -87,5 +105,28 @@ mod tests {
         assert!(right.y < -20.0 && right.x.abs() < 0.05, "{right:?}");
         assert!(top.x > 10.0, "{top:?}");
         assert!((view_yaw_enu_rad(0.0) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_turned_view_is_flown_with_the_image_where_the_view_has_it() {
+        let fov_y = 2.0 * ((720.0 / 1280.0) * (0.5 * FOV_X_RAD).tan()).atan();
+        let fp = Footprint::from_fov(ALTITUDE_M, FOV_X_RAD, fov_y);
+        for mount_yaw in [0.0, 0.3, -2.0] {
+            for view_yaw in [0.0, 1.0, -2.5, std::f64::consts::FRAC_PI_2] {
+                let nose_enu = nose_yaw_enu_for_view(view_yaw, mount_yaw);
+                let (right, top) = image_edges_on_ground(mount_yaw, nose_enu);
+                let view = View::new(Enu2::zeros(), view_yaw);
+                let want_right = view.from_view_axes(fp.half_width_m, 0.0);
+                let want_top = view.from_view_axes(0.0, fp.half_height_m);
+                assert!(
+                    (right - want_right).norm() < 0.05,
+                    "{right:?} {want_right:?}"
+                );
+                assert!((top - want_top).norm() < 0.05, "{top:?} {want_top:?}");
+                // And the view is read back from the nose's ATTITUDE yaw.
+                let back = view_yaw_enu_of_nose(yaw_enu_to_ned(nose_enu), mount_yaw);
+                assert!(crate::frames::wrap_angle(back - view_yaw).abs() < 1e-9);
+            }
+        }
     }
 }

@@ -9,6 +9,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use super::heading;
 use crate::config::Config;
 use crate::guidance::GuidanceKind;
 use crate::metrics::StepRecord;
@@ -23,6 +24,7 @@ use crate::vision::camera_model::{CameraModel, CameraMount, VehiclePoseNed};
 use crate::vision::capture::{Camera, CaptureConfig};
 use crate::vision::detector::{AprilTagDetector, RoiPx, RoiSearch};
 use crate::vision::projection::{measure_tag, ProjectionNoise};
+use crate::world::camera::{View, NORTH_VIEW_YAW_ENU_RAD};
 use crate::world::geometry::Enu2;
 use crate::world::World;
 
@@ -289,6 +291,9 @@ struct DaemonSensor {
     /// without a real camera, so that a flight's random streams do not depend on it).
     synthetic: RenderedSensor,
     field: Option<FieldCamera>,
+    /// The camera's yaw on its mount (`daemon.camera_mount_rpy_rad`), rad: the view faces
+    /// the nose's heading turned by it.
+    mount_yaw_rad: f64,
     /// The vehicle's pose from telemetry at this tick.
     telemetry_pose: Option<VehiclePoseNed>,
     /// The camera is frozen (fault injection) at this tick.
@@ -306,7 +311,7 @@ impl Sensor for DaemonSensor {
     fn observe(
         &mut self,
         _t_s: f64,
-        vehicle_enu: &Enu2,
+        view: &View,
         prior: &Prior,
     ) -> Result<Observation, Self::Error> {
         let started = Instant::now();
@@ -329,14 +334,14 @@ impl Sensor for DaemonSensor {
         } else if let Some((pose, z)) = field_look {
             self.observed_pose = Some(pose);
             Observation::Frame {
-                taken_from_enu: pose.position_enu(),
+                taken_from: View::new(
+                    pose.position_enu(),
+                    heading::view_yaw_enu_of_nose(pose.yaw_rad, self.mount_yaw_rad),
+                ),
                 z,
             }
         } else {
-            let z = match self
-                .synthetic
-                .measure_with_seed(vehicle_enu, prior, frame_seed)
-            {
+            let z = match self.synthetic.measure_with_seed(view, prior, frame_seed) {
                 Ok(z) => z,
                 Err(e) => {
                     tracing::warn!("camera frame dropped: {e}");
@@ -344,7 +349,7 @@ impl Sensor for DaemonSensor {
                 }
             };
             Observation::Frame {
-                taken_from_enu: *vehicle_enu,
+                taken_from: *view,
                 z,
             }
         };
@@ -428,6 +433,7 @@ impl Pipeline {
                 shared: shared.clone(),
                 synthetic,
                 field,
+                mount_yaw_rad: cfg.daemon.camera_mount_rpy_rad[2],
                 telemetry_pose: None,
                 camera_frozen: false,
                 observed_pose: None,
@@ -482,6 +488,9 @@ impl Pipeline {
             .set_target(self.target.position_enu, self.target.heading_enu_rad);
         let input = TickInput {
             vehicle_enu: self.last_pose.map(|p| p.position_enu()),
+            view_yaw_enu_rad: self.last_pose.map_or(NORTH_VIEW_YAW_ENU_RAD, |p| {
+                heading::view_yaw_enu_of_nose(p.yaw_rad, self.sensor.mount_yaw_rad)
+            }),
             link_lost: snapshot.map_or(true, |s| s.link_lost),
             // No ground truth in the field.
             truth_enu: synthetic.then_some(self.target.position_enu),

@@ -8,6 +8,7 @@
 use serde::Serialize;
 
 use super::flight_log::LoggedStep;
+use super::heading::view_yaw_enu_of_nose;
 use crate::config::Config;
 use crate::guidance::GuidanceKind;
 use crate::rng::{stream_rng, Stream};
@@ -15,6 +16,7 @@ use crate::tracker::{
     Command, Decision, EstimatorKind, FrozenClock, Observation, TickInput, Tracker, TrackerError,
     UnknownEstimator,
 };
+use crate::world::camera::View;
 use crate::world::geometry::Enu2;
 
 /// What the replay found.
@@ -61,13 +63,19 @@ pub fn replay(
         stream_rng(seed, 0, Stream::Filter, 0),
         stream_rng(seed, 0, Stream::Guidance, 0),
     )?;
+    let mount_yaw_rad = cfg.daemon.camera_mount_rpy_rad[2];
     let mut max_diff: f64 = 0.0;
     let (mut wp_sum, mut wp_n) = (0.0, 0usize);
     let mut estimates = Vec::with_capacity(steps.len());
     for s in steps {
+        // The camera's view as the flight had it: the logged heading turned by the mount.
+        let view = View::new(
+            s.vehicle_enu,
+            view_yaw_enu_of_nose(s.vehicle_yaw_ned_rad, mount_yaw_rad),
+        );
         let observation = if s.frame {
             Observation::Frame {
-                taken_from_enu: s.vehicle_enu,
+                taken_from: view,
                 z: s.measurement_enu,
             }
         } else {
@@ -75,6 +83,7 @@ pub fn replay(
         };
         let input = TickInput {
             vehicle_enu: Some(s.vehicle_enu),
+            view_yaw_enu_rad: view.yaw_enu_rad,
             link_lost: false,
             truth_enu: None,
             truth_velocity_enu: Enu2::zeros(),
@@ -84,7 +93,7 @@ pub fn replay(
         max_diff = max_diff.max((est - s.estimate_enu).norm());
         estimates.push(est);
         if let Some(flown) = s.command_enu {
-            let decided = tracker.decide(s.t_s, &s.vehicle_enu, None, &FrozenClock)?;
+            let decided = tracker.decide(s.t_s, &view, None, &FrozenClock)?;
             if let Some(Decision::Command {
                 command: Command::GoTo {
                     position_enu: w, ..

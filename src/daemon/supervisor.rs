@@ -193,8 +193,10 @@ impl Supervisor<'_> {
     /// it does not have it streams what the firmware needs to let the pilot hand over (PX4:
     /// the vehicle's own position) or nothing (ArduPilot).
     async fn follow_pilot(&mut self) {
-        let yaw = heading::flown_yaw_enu_rad(self.cfg);
         let link = &self.vehicle.link;
+        // What the firmware needs while the pilot has it: the vehicle where it is, nose
+        // where it is.
+        let yaw = link.heading_enu_rad();
         let mode = link.state().mode;
         match self.engagement.update(mode) {
             engagement::Change::Engaged => {
@@ -244,16 +246,25 @@ impl Supervisor<'_> {
             return;
         }
         if let Some(c) = cmd {
+            let mount_yaw = self.cfg.daemon.camera_mount_rpy_rad[2];
             let target = match c {
                 Command::GoTo {
                     position_enu,
                     velocity_enu,
-                } => Some((position_enu, velocity_enu)),
-                Command::HoldHere => snap.map(|s| (s.pose.position_enu(), Enu2::zeros())),
+                    view_yaw_enu_rad,
+                } => Some((
+                    position_enu,
+                    velocity_enu,
+                    heading::nose_yaw_enu_for_view(view_yaw_enu_rad, mount_yaw),
+                )),
+                // Where it is, nose where it is.
+                Command::HoldHere => snap.map(|s| {
+                    let yaw = crate::frames::yaw_ned_to_enu(s.pose.yaw_rad);
+                    (s.pose.position_enu(), Enu2::zeros(), yaw)
+                }),
             };
-            if let Some((w, v)) = target {
+            if let Some((w, v, yaw)) = target {
                 let p = PositionEnu::from_xy(&w, self.cfg.agent.altitude_m);
-                let yaw = heading::flown_yaw_enu_rad(self.cfg);
                 if let Err(e) = self.vehicle.link.set_moving_setpoint(p, v, yaw) {
                     self.geofence_refusals += 1;
                     tracing::warn!("{e}");

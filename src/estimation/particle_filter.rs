@@ -12,6 +12,7 @@ use thiserror::Error;
 
 use super::road_following;
 use crate::motion::{Histories, MotionError, MotionModel};
+use crate::world::camera::View;
 use crate::world::geometry::{BoundsEnu, Enu2};
 use crate::world::measurement::Gaussian2;
 use crate::world::road::RoadPieces;
@@ -228,13 +229,13 @@ impl ParticleFilter {
     }
 
     /// One filter period: predict with `model`, update with `measurement` (or with negative
-    /// information from the footprint of an agent at `agent_enu` when there is none), then
+    /// information from the footprint of `view` when there is none), then
     /// resample as the thresholds say.
     pub fn step<R: Rng + ?Sized>(
         &mut self,
         model: &mut dyn MotionModel,
         measurement: Option<Enu2>,
-        agent_enu: &Enu2,
+        view: &View,
         world: &World,
         rng: &mut R,
     ) -> Result<StepReport, FilterError> {
@@ -249,7 +250,7 @@ impl ParticleFilter {
         }
         // A model that knows the roads drives its tracks their allowed way already.
         let headings = !model.knows_the_roads();
-        self.update(measurement, agent_enu, world, headings);
+        self.update(measurement, view, world, headings);
 
         let action = if !self.normalize() {
             self.counters.recoveries += 1;
@@ -399,13 +400,7 @@ impl ParticleFilter {
 
     /// Weighs the predicted particles: the road constraint (with the tracks' headings
     /// when `headings`, see [`Self::road_distance`]), then the measurement or its absence.
-    fn update(
-        &mut self,
-        measurement: Option<Enu2>,
-        agent_enu: &Enu2,
-        world: &World,
-        headings: bool,
-    ) {
+    fn update(&mut self, measurement: Option<Enu2>, view: &View, world: &World, headings: bool) {
         if let Some(sigma) = self.params.road_sigma_m {
             let k = -0.5 / (sigma * sigma);
             let heading = self.heading_check(headings);
@@ -436,7 +431,7 @@ impl ParticleFilter {
                 // tag would be in the image and clear of occlusions (the detector misses
                 // a tag cut by the edge, and a miss there must not erase the truth).
                 for i in 0..self.weights.len() {
-                    if world.is_wholly_visible(agent_enu, &self.histories.newest(i)) {
+                    if world.is_wholly_visible(view, &self.histories.newest(i)) {
                         self.weights[i] *= self.params.miss_probability;
                     }
                 }

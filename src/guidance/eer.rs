@@ -44,8 +44,10 @@ pub use commitment::{committed_choice, Centring};
 pub use escape::{speed_away_mps, weigh_by_escape, DEFAULT_SEARCH_ESCAPE_FLOOR};
 
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
+use super::view_heading::HeadingRule;
 use crate::estimation::{road_following, ParticleFilter};
 use crate::motion::{Histories, MotionError, MotionModel};
+use crate::world::camera::View;
 use crate::world::geometry::Enu2;
 use crate::world::measurement::Gaussian2;
 use crate::world::World;
@@ -357,8 +359,13 @@ fn entropy_measured_fast(
     max + sum.ln() - acc / sum
 }
 
-/// EER of every candidate, fast: O(N_H^2 N_M) once, then O(N_H) per candidate.
-/// Returns `(h_now, eer per candidate)`.
+/// The views of candidates seen facing north (the paper's constant heading).
+pub fn north_views(candidates: &[Enu2]) -> Vec<View> {
+    candidates.iter().map(|c| View::north(*c)).collect()
+}
+
+/// EER of every candidate, fast: O(N_H^2 N_M) once, then O(N_H) per candidate; each
+/// candidate seen facing north. Returns `(h_now, eer per candidate)`.
 pub fn evaluate_fast(
     inputs: &EerInputs,
     candidates: &[Enu2],
@@ -369,7 +376,7 @@ pub fn evaluate_fast(
 ) -> (f64, Vec<f64>) {
     evaluate_fast_led(
         inputs,
-        candidates,
+        &north_views(candidates),
         &[],
         world,
         kernel,
@@ -387,14 +394,15 @@ fn led(inputs: &EerInputs, i: usize, lead_s: f64) -> Enu2 {
     }
 }
 
-/// [`evaluate_fast`] with a lead per candidate (`leads[c]`, s; empty: all zero): which
+/// [`evaluate_fast`] with each candidate's view (where it is and which way the image faces
+/// there) and a lead per candidate (`leads[c]`, s; empty: all zero): which
 /// particles a candidate sees is judged where they will be when the agent gets there,
 /// `lead` after the horizon's end ([`intercepts`]). Approximation, documented: the
 /// measured-branch entropies and the kernel sums stay those at the horizon's end (a
 /// belief carried along at its particles' velocities keeps its shape over the lead).
 pub fn evaluate_fast_led(
     inputs: &EerInputs,
-    candidates: &[Enu2],
+    candidates: &[View],
     leads: &[f64],
     world: &World,
     kernel: &Gaussian2,
@@ -487,14 +495,21 @@ pub fn evaluate_reference(
     kernel: &Gaussian2,
     miss_probability: f64,
 ) -> (f64, Vec<f64>) {
-    evaluate_reference_led(inputs, candidates, &[], world, kernel, miss_probability)
+    evaluate_reference_led(
+        inputs,
+        &north_views(candidates),
+        &[],
+        world,
+        kernel,
+        miss_probability,
+    )
 }
 
-/// [`evaluate_reference`] with a lead per candidate, as [`evaluate_fast_led`] takes it:
-/// tests only.
+/// [`evaluate_reference`] with each candidate's view and lead, as [`evaluate_fast_led`]
+/// takes them: tests only.
 pub fn evaluate_reference_led(
     inputs: &EerInputs,
-    candidates: &[Enu2],
+    candidates: &[View],
     leads: &[f64],
     world: &World,
     kernel: &Gaussian2,
@@ -518,7 +533,7 @@ pub fn evaluate_reference_led(
             let lead_s = leads.get(k).copied().unwrap_or(0.0);
             // The filter's model of the camera: through the detector, a tag is found (and
             // a miss is evidence) only when the whole tag is in view.
-            let visible = |c: &Enu2, i: usize| world.is_wholly_visible(c, &led(inputs, i, lead_s));
+            let visible = |c: &View, i: usize| world.is_wholly_visible(c, &led(inputs, i, lead_s));
             let mut expected = 0.0;
             for j in 0..n {
                 for m in 0..inputs.n_m {
@@ -580,6 +595,9 @@ pub struct EerPlanner {
     searching: bool,
     last_waypoint_enu: Option<Enu2>,
     escape_weighting: bool,
+    /// The target's velocity, world ENU, m/s, while the vehicle rides along with it (the
+    /// belief concentrated under the view): the candidates' views turn as the command will.
+    over_target_velocity_enu: Option<Enu2>,
 }
 
 impl EerPlanner {
@@ -628,7 +646,14 @@ impl EerPlanner {
             searching: false,
             last_waypoint_enu: None,
             escape_weighting: false,
+            over_target_velocity_enu: None,
         }
+    }
+
+    /// Whether the vehicle rides along with the target at this velocity (world ENU, m/s;
+    /// `None`: it does not): the heading rule then turns every candidate's view for it.
+    pub fn ride_along(&mut self, over_target_velocity_enu: Option<Enu2>) {
+        self.over_target_velocity_enu = over_target_velocity_enu;
     }
 
     /// The parameters.
@@ -718,8 +743,10 @@ impl EerPlanner {
         Ok(&self.inputs)
     }
 
-    /// Steps 3 and 4: candidates, EER of each, argmax. No motion-model calls.
-    pub fn decide(&mut self, agent_enu: &Enu2, world: &World) -> EerDecision {
+    /// Steps 3 and 4: candidates, EER of each (seen from where the vehicle will be, facing
+    /// the way `heading` turns it there), argmax. No motion-model calls.
+    pub fn decide(&mut self, agent: &View, heading: &HeadingRule, world: &World) -> EerDecision {
+        let agent_enu = &agent.centre_enu;
         if self.escape_weighting {
             weigh_by_escape(&mut self.inputs, agent_enu, self.params.search_escape_floor);
         }
@@ -746,9 +773,14 @@ impl EerPlanner {
             ),
             _ => Vec::new(),
         };
+        let over_target = self.over_target_velocity_enu;
+        let views: Vec<View> = cands
+            .iter()
+            .map(|c| heading.view_over(agent, c, over_target))
+            .collect();
         let (h0, eer) = evaluate_fast_led(
             &self.inputs,
-            &cands,
+            &views,
             &leads,
             world,
             &p.kernel,
@@ -788,12 +820,13 @@ impl EerPlanner {
         &mut self,
         pf: &ParticleFilter,
         model: &mut dyn MotionModel,
-        agent_enu: &Enu2,
+        agent: &View,
+        heading: &HeadingRule,
         world: &World,
         rng: &mut R,
     ) -> Result<EerDecision, MotionError> {
         self.prepare(pf, model, world, rng)?;
-        Ok(self.decide(agent_enu, world))
+        Ok(self.decide(agent, heading, world))
     }
 
     /// The inputs of the last prepared cycle.

@@ -11,12 +11,14 @@
 pub mod eer;
 pub mod entropy;
 pub mod lawn;
+pub mod view_heading;
 
 use std::fmt;
 use std::str::FromStr;
 
 pub use eer::{EerDecision, EerParams, EerPlanner, ReachShape};
 pub use lawn::{LawnConfig, LawnmowerPath};
+pub use view_heading::{HeadingRule, ViewHeading};
 
 /// A guidance law.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]

@@ -125,6 +125,9 @@ pub struct MockAutopilot {
     armed: bool,
     state: KinematicState,
     yaw_ned_rad: f64,
+    /// The heading the last position target asked for, local NED yaw (rad); the vehicle
+    /// turns to it at the firmware's auto yaw rate.
+    yaw_target_ned_rad: f64,
     /// Target the vehicle flies to in the current mode, local NED.
     target_ned_m: Option<[f64; 3]>,
     /// Velocity of the last position + velocity target (feed-forward), NED, m/s.
@@ -214,6 +217,7 @@ impl MockAutopilot {
             armed: false,
             state: KinematicState::default(),
             yaw_ned_rad: 0.0,
+            yaw_target_ned_rad: 0.0,
             target_ned_m: None,
             target_vel_ned_mps: [0.0; 3],
             last_setpoint: None,

@@ -174,7 +174,8 @@ impl SimRun {
         let clock = MonotonicClock::new();
         let dt_phys = 1.0 / cfg.timing.physics_hz;
         let n_phys = (spec.duration_s * cfg.timing.physics_hz).round() as u64;
-        let mut setpoint = MovingSetpoint::fixed(self.agent.position_enu);
+        let mut setpoint =
+            MovingSetpoint::fixed(self.agent.position_enu, self.agent.view_yaw_enu_rad);
         let mut steps: Vec<StepRecord> = Vec::new();
         let mut filter_ms = Vec::new();
         let mut guidance_ms = Vec::new();
@@ -185,9 +186,11 @@ impl SimRun {
             self.target.step(&world.road, dt_phys, &mut self.rng_target);
             let (sp, ff) = setpoint.at(t_s, &world.workspace_enu);
             self.agent.step(&sp, &ff, dt_phys);
+            self.agent.turn_toward(setpoint.view_yaw_enu_rad, dt_phys);
             sensor.set_target(&self.target);
             let input = TickInput {
                 vehicle_enu: Some(self.agent.position_enu),
+                view_yaw_enu_rad: self.agent.view_yaw_enu_rad,
                 link_lost: false,
                 truth_enu: Some(self.target.position_enu),
                 truth_velocity_enu: self.target.velocity_enu,
@@ -216,11 +219,13 @@ impl SimRun {
                 if let Command::GoTo {
                     position_enu,
                     velocity_enu,
+                    view_yaw_enu_rad,
                 } = command
                 {
                     setpoint = MovingSetpoint {
                         position_enu,
                         velocity_enu,
+                        view_yaw_enu_rad,
                         since_s: out.t_s,
                     };
                 }
@@ -244,14 +249,17 @@ impl SimRun {
 struct MovingSetpoint {
     position_enu: Enu2,
     velocity_enu: Enu2,
+    /// The heading the view turns to, world ENU, rad.
+    view_yaw_enu_rad: f64,
     since_s: f64,
 }
 
 impl MovingSetpoint {
-    fn fixed(position_enu: Enu2) -> Self {
+    fn fixed(position_enu: Enu2, view_yaw_enu_rad: f64) -> Self {
         Self {
             position_enu,
             velocity_enu: Enu2::zeros(),
+            view_yaw_enu_rad,
             since_s: 0.0,
         }
     }

@@ -1,8 +1,10 @@
 //! The simulated agent: a multicopter at fixed altitude following position setpoints with a
 //! proportional velocity controller, a speed limit (per axis or on the norm, as configured)
-//! and an acceleration limit.
+//! and an acceleration limit, turning its camera's view at a yaw-rate limit.
 
 use crate::config::{AgentConfig, SpeedLimitShape};
+use crate::frames::wrap_angle;
+use crate::world::camera::{View, NORTH_VIEW_YAW_ENU_RAD};
 use crate::world::geometry::Enu2;
 
 /// Agent state in the world ENU frame (horizontal; altitude is fixed).
@@ -12,6 +14,9 @@ pub struct AgentSim {
     pub position_enu: Enu2,
     /// Velocity, m/s.
     pub velocity_enu: Enu2,
+    /// Which way the camera's image faces (the nose: the camera is mounted straight), world
+    /// ENU yaw, rad.
+    pub view_yaw_enu_rad: f64,
     params: AgentConfig,
 }
 
@@ -21,7 +26,24 @@ impl AgentSim {
         Self {
             position_enu: Enu2::new(params.start_enu_m[0], params.start_enu_m[1]),
             velocity_enu: Enu2::zeros(),
+            view_yaw_enu_rad: NORTH_VIEW_YAW_ENU_RAD,
             params,
+        }
+    }
+
+    /// What the camera sees from now: its position and heading.
+    pub fn view(&self) -> View {
+        View::new(self.position_enu, self.view_yaw_enu_rad)
+    }
+
+    /// Turns `dt_s` toward the heading `yaw_enu_rad` (world ENU) the short way round, at
+    /// most at the yaw-rate limit.
+    pub fn turn_toward(&mut self, yaw_enu_rad: f64, dt_s: f64) {
+        let max_step = self.params.yaw_rate_limit_rad_s() * dt_s;
+        let to_go = wrap_angle(yaw_enu_rad - self.view_yaw_enu_rad);
+        if to_go != 0.0 {
+            self.view_yaw_enu_rad =
+                wrap_angle(self.view_yaw_enu_rad + to_go.clamp(-max_step, max_step));
         }
     }
 
@@ -86,6 +108,34 @@ mod tests {
             prev_v = a.velocity_enu;
         }
         assert!((a.position_enu - goal).norm() < 0.15, "{}", a.position_enu);
+    }
+
+    #[test]
+    fn turns_the_short_way_round_at_the_yaw_rate_limit() {
+        let c = Config::default_lab();
+        let mut a = AgentSim::new(c.agent.clone());
+        assert_eq!(a.view_yaw_enu_rad, NORTH_VIEW_YAW_ENU_RAD);
+        let rate = c.agent.yaw_rate_limit_rad_s();
+        assert!((rate - 45f64.to_radians()).abs() < 1e-12);
+        // North (pi/2) to just past west (pi + 0.1 = -pi + 0.1): counter-clockwise, 1.67 rad.
+        let target = -std::f64::consts::PI + 0.1;
+        let dt = 0.1;
+        let mut prev = a.view_yaw_enu_rad;
+        for _ in 0..30 {
+            a.turn_toward(target, dt);
+            let step = wrap_angle(a.view_yaw_enu_rad - prev);
+            assert!((0.0..=rate * dt + 1e-12).contains(&step), "{step}");
+            prev = a.view_yaw_enu_rad;
+        }
+        assert!(
+            (a.view_yaw_enu_rad - target).abs() < 1e-12,
+            "{}",
+            a.view_yaw_enu_rad
+        );
+        assert_eq!(a.view().yaw_enu_rad, target);
+        // At the heading it stays exactly there.
+        a.turn_toward(target, dt);
+        assert_eq!(a.view_yaw_enu_rad, target);
     }
 
     #[test]

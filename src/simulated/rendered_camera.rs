@@ -6,12 +6,14 @@
 //! rendered at zero roll and pitch with the nose north; the vision tests cover tilted views.
 
 use crate::config::Config;
+use crate::frames::yaw_enu_to_ned;
 use crate::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
 use crate::vision::detector::{AprilTagDetector, RoiPx, RoiSearch, SearchOutcome};
 use crate::vision::projection::{measure_tag, ProjectionNoise};
 use crate::vision::render::{RenderOptions, RenderedFrame, SceneEnu, TargetAppearance};
 use crate::vision::tag_family::TagBitmap;
 use crate::vision::VisionError;
+use crate::world::camera::View;
 use crate::world::geometry::{Enu2, PolygonEnu};
 
 /// Counts of how frames went, for reports.
@@ -90,18 +92,20 @@ impl VisionSensor {
         &self.cam
     }
 
-    /// One frame: the measured target position (world ENU), if the tag was found.
+    /// One frame from `view`: the measured target position (world ENU), if the tag was found.
     /// `predicted` is the filter's prior (mean and covariance, world ENU): the detector
     /// searches around it first.
     pub fn measure(
         &mut self,
-        agent_enu: &Enu2,
+        view: &View,
         target_enu: &Enu2,
         target_heading_enu_rad: f64,
         predicted: Option<(Enu2, nalgebra::Matrix2<f64>)>,
         frame_seed: u64,
     ) -> Result<Option<Enu2>, VisionError> {
-        let pose = VehiclePoseNed::level_above(agent_enu, self.altitude_m);
+        // The camera is mounted straight: the vehicle's nose is the image's top.
+        let mut pose = VehiclePoseNed::level_above(&view.centre_enu, self.altitude_m);
+        pose.yaw_rad = yaw_enu_to_ned(view.yaw_enu_rad);
         let scene = SceneEnu {
             target: Some(TargetAppearance {
                 position_enu_m: [target_enu.x, target_enu.y],
@@ -159,14 +163,17 @@ mod tests {
         {
             let truth = agent + Enu2::new(x, y);
             let z = s
-                .measure(&agent, &truth, h, None, i as u64)
+                .measure(&View::north(agent), &truth, h, None, i as u64)
                 .unwrap()
                 .expect("the tag is in view");
             errs.push((z - truth).norm());
         }
         // Outside the footprint: nothing.
         let far = agent + Enu2::new(1.5, 0.0);
-        assert!(s.measure(&agent, &far, 0.0, None, 9).unwrap().is_none());
+        assert!(s
+            .measure(&View::north(agent), &far, 0.0, None, 9)
+            .unwrap()
+            .is_none());
         assert!(errs.iter().all(|&e| e < 0.005), "{errs:?}");
         assert_eq!(s.stats.frames, 4);
         assert_eq!(s.stats.detections, 3);

@@ -8,6 +8,7 @@ use crate::frames::Enu2;
 use crate::rng::CoreRng;
 use crate::tracker::{Observation, Prior, Sensor};
 use crate::vision::VisionError;
+use crate::world::camera::View;
 use crate::world::World;
 
 /// The paper's sensor: the target is seen when it is inside the footprint and outside every
@@ -40,23 +41,24 @@ impl Sensor for AnalyticSensor<'_> {
     fn observe(
         &mut self,
         _t_s: f64,
-        vehicle_enu: &Enu2,
+        view: &View,
         _prior: &Prior,
     ) -> Result<Observation, Self::Error> {
-        let visible = self.world.is_visible(vehicle_enu, &self.target_enu);
+        let visible = self.world.is_visible(view, &self.target_enu);
         let z = visible.then(|| {
             self.world
                 .measurement
                 .measure(&self.target_enu, &mut self.rng)
         });
         Ok(Observation::Frame {
-            taken_from_enu: *vehicle_enu,
+            taken_from: *view,
             z,
         })
     }
 }
 
-/// Frames rendered by the synthetic camera from a level vehicle, searched by the real
+/// Frames rendered by the synthetic camera from a level vehicle at the view's heading,
+/// searched by the real
 /// detector around the filter's prior, projected to the ground.
 pub struct RenderedSensor {
     /// The camera, detector and projection (and their statistics).
@@ -83,16 +85,16 @@ impl RenderedSensor {
         self.target_heading_enu_rad = heading_enu_rad;
     }
 
-    /// One frame's measurement from `vehicle_enu` with the frame noise seeded by
+    /// One frame's measurement from `view` with the frame noise seeded by
     /// `frame_seed` (drawn by the caller, who may need the draw even when it takes no frame).
     pub fn measure_with_seed(
         &mut self,
-        vehicle_enu: &Enu2,
+        view: &View,
         prior: &Prior,
         frame_seed: u64,
     ) -> Result<Option<Enu2>, VisionError> {
         self.camera.measure(
-            vehicle_enu,
+            view,
             &self.target_enu,
             self.target_heading_enu_rad,
             Some((prior.mean_enu, prior.cov_m2)),
@@ -112,14 +114,14 @@ impl Sensor for RenderedSensor {
     fn observe(
         &mut self,
         _t_s: f64,
-        vehicle_enu: &Enu2,
+        view: &View,
         prior: &Prior,
     ) -> Result<Observation, VisionError> {
         // The frame's noise comes from the measurement stream, like the analytic model's.
         let frame_seed = self.next_frame_seed();
-        let z = self.measure_with_seed(vehicle_enu, prior, frame_seed)?;
+        let z = self.measure_with_seed(view, prior, frame_seed)?;
         Ok(Observation::Frame {
-            taken_from_enu: *vehicle_enu,
+            taken_from: *view,
             z,
         })
     }

@@ -141,7 +141,7 @@ impl Tracker {
             _ => return false,
         };
         let speeds = self.hypothesis_speeds();
-        let looked: Vec<(f64, Enu2)> = self
+        let looked: Vec<(f64, View)> = self
             .empty_frames
             .iter()
             .filter(|(t, _)| *t >= tm)

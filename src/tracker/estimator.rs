@@ -6,6 +6,7 @@ use nalgebra::Matrix2;
 use crate::estimation::{FilterError, KalmanFilter, ParticleFilter};
 use crate::frames::Enu2;
 use crate::motion::{self, MotionModel};
+use crate::world::camera::View;
 use crate::world::World;
 
 /// Which estimator, by its `--motion` name.
@@ -104,20 +105,18 @@ impl Estimator {
         }
     }
 
-    /// One filter step with what the camera saw from `vehicle_enu` (`z`: the target's
+    /// One filter step with what the camera saw from `view` (`z`: the target's
     /// measured position, or `None` for a frame without it). Returns N_eff (NaN for the
     /// Kalman filter).
     pub fn step<R: rand::Rng + ?Sized>(
         &mut self,
         z: Option<Enu2>,
-        vehicle_enu: &Enu2,
+        view: &View,
         world: &World,
         rng: &mut R,
     ) -> Result<f64, FilterError> {
         match self {
-            Self::Particle { pf, model } => {
-                Ok(pf.step(model.as_mut(), z, vehicle_enu, world, rng)?.n_eff)
-            }
+            Self::Particle { pf, model } => Ok(pf.step(model.as_mut(), z, view, world, rng)?.n_eff),
             Self::Kalman(kf) => {
                 kf.step(z);
                 Ok(f64::NAN)

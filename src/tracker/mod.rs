@@ -32,10 +32,13 @@ use crate::estimation::{
     FilterError, FilterParams, KalmanFilter, KalmanParams, ParticleFilter, RouteStart,
 };
 use crate::frames::Enu2;
-use crate::guidance::{EerParams, EerPlanner, GuidanceKind, LawnConfig, LawnmowerPath, ReachShape};
+use crate::guidance::{
+    EerParams, EerPlanner, GuidanceKind, HeadingRule, LawnConfig, LawnmowerPath, ReachShape,
+};
 use crate::metrics::StepRecord;
 use crate::motion::{self, MotionError, MotionParams};
 use crate::rng::CoreRng;
+use crate::world::camera::View;
 use crate::world::World;
 
 /// How far back the measured track reaches for the target's last seen velocity, s.
@@ -118,6 +121,8 @@ pub struct TrackerParams {
     pub rates: Rates,
     /// The guidance law.
     pub guidance: GuidanceKind,
+    /// Which way every command turns the view (and EER judges its candidates at).
+    pub heading: HeadingRule,
     /// The particle filter.
     pub filter: FilterParams,
     /// The Kalman filter (the `kf` estimator and `kf` guidance).
@@ -223,9 +228,9 @@ pub struct Tracker {
     last_seen_velocity_enu: Enu2,
     /// The measurements of the last [`MEASURED_TRACK_S`] seconds, oldest first.
     recent_measurements: std::collections::VecDeque<(f64, Enu2)>,
-    /// The frames without the target since the last measurement (time, where the camera
-    /// was, world ENU), oldest first, at most [`MAX_EMPTY_FRAMES`].
-    empty_frames: std::collections::VecDeque<(f64, Enu2)>,
+    /// The frames without the target since the last measurement (time, the camera's view),
+    /// oldest first, at most [`MAX_EMPTY_FRAMES`].
+    empty_frames: std::collections::VecDeque<(f64, View)>,
 }
 
 impl Tracker {
@@ -324,7 +329,10 @@ impl Tracker {
         sensor: &mut S,
         clock: &dyn Clock,
     ) -> Result<TickOutput, TickError<S::Error>> {
-        let Some(vehicle_enu) = input.vehicle_enu else {
+        let Some(vehicle) = input
+            .vehicle_enu
+            .map(|p| View::new(p, input.view_yaw_enu_rad))
+        else {
             // Nothing to act from yet: time passes, what is due stays due.
             return Ok(TickOutput {
                 t_s: self.schedule.skip(),
@@ -338,13 +346,13 @@ impl Tracker {
         };
         if due.filter {
             let observation = sensor
-                .observe(due.t_s, &vehicle_enu, &self.prior())
+                .observe(due.t_s, &vehicle, &self.prior())
                 .map_err(TickError::Sensor)?;
             out.step = Some(self.update(due.t_s, observation, input, clock)?);
         }
         if due.guidance {
             let truth = input.truth_enu.map(|p| (p, input.truth_velocity_enu));
-            out.decision = self.decide(due.t_s, &vehicle_enu, truth, clock)?;
+            out.decision = self.decide(due.t_s, &vehicle, truth, clock)?;
         }
         Ok(out)
     }
@@ -360,8 +368,8 @@ impl Tracker {
     ) -> Result<StepOutcome, TrackerError> {
         let vehicle_enu = input.vehicle_enu.unwrap_or(Enu2::new(f64::NAN, f64::NAN));
         let (taken_from, z, frame) = match observation {
-            Observation::Frame { taken_from_enu, z } => (taken_from_enu, z, true),
-            Observation::NoFrame => (vehicle_enu, None, false),
+            Observation::Frame { taken_from, z } => (taken_from, z, true),
+            Observation::NoFrame => (View::new(vehicle_enu, input.view_yaw_enu_rad), None, false),
         };
         if frame {
             self.last_frame_s = t_s;
@@ -415,10 +423,10 @@ impl Tracker {
         let record = StepRecord {
             t_s,
             target_enu: truth,
-            agent_enu: taken_from,
+            agent_enu: taken_from.centre_enu,
             waypoint_enu: match self.command {
                 Some(Command::GoTo { position_enu, .. }) => position_enu,
-                _ => taken_from,
+                _ => taken_from.centre_enu,
             },
             measurement_enu: z,
             estimate_enu: self.estimator.mean(),

@@ -4,14 +4,14 @@
 use super::*;
 
 impl Tracker {
-    /// One guidance decision at `t_s` for a vehicle at `vehicle_enu` (`truth`: the true
+    /// One guidance decision at `t_s` for a vehicle seeing `vehicle` (`truth`: the true
     /// target's position and velocity, world ENU, where a simulator knows them). `None`: no
     /// decision is taken on a stale vehicle state (link lost). Public for `infotrack
     /// replay`.
     pub fn decide(
         &mut self,
         t_s: f64,
-        vehicle_enu: &Enu2,
+        vehicle: &View,
         truth: Option<(Enu2, Enu2)>,
         clock: &dyn Clock,
     ) -> Result<Option<Decision>, TrackerError> {
@@ -19,7 +19,7 @@ impl Tracker {
             return Ok(None);
         }
         let started = clock.now_s();
-        let decided = self.choose(t_s, vehicle_enu, truth);
+        let decided = self.choose(t_s, vehicle, truth);
         let compute_ms = (clock.now_s() - started) * 1e3;
         let failsafe = self.params.failsafe;
         let over_budget = failsafe.is_some_and(|f| compute_ms > f.guidance_budget_ms);
@@ -38,14 +38,19 @@ impl Tracker {
             return Ok(Some(Decision::Overrun { compute_ms }));
         }
         let command = match command {
-            Command::GoTo {
-                position_enu,
-                velocity_enu,
-            } => Command::GoTo {
-                position_enu: self.world.workspace_enu.clamp(&position_enu),
-                velocity_enu,
-            },
-            hold => hold,
+            Some((position_enu, velocity_enu)) => {
+                let position_enu = self.world.workspace_enu.clamp(&position_enu);
+                Command::GoTo {
+                    position_enu,
+                    velocity_enu,
+                    view_yaw_enu_rad: self.params.heading.yaw_enu_rad(
+                        vehicle,
+                        &position_enu,
+                        &velocity_enu,
+                    ),
+                }
+            }
+            None => Command::HoldHere,
         };
         self.command = Some(command);
         Ok(Some(Decision::Command {
@@ -54,48 +59,33 @@ impl Tracker {
         }))
     }
 
-    /// What the guidance law (or the failsafe in force) says, before the geofence.
+    /// What the guidance law (or the failsafe in force) says, before the geofence and the
+    /// heading: a setpoint and its velocity (world ENU, m and m/s), or `None` to hold.
     fn choose(
         &mut self,
         t_s: f64,
-        vehicle_enu: &Enu2,
+        vehicle: &View,
         truth: Option<(Enu2, Enu2)>,
-    ) -> Result<Command, TrackerError> {
+    ) -> Result<Option<(Enu2, Enu2)>, TrackerError> {
+        let fixed = |p: Enu2| Some((p, Enu2::zeros()));
         if let Some(f) = self.params.failsafe {
             match (self.state, f.fallback) {
                 (TrackState::CameraLost, _) | (TrackState::Lost, LostFallback::Hold) => {
-                    return Ok(Command::HoldHere)
+                    return Ok(None)
                 }
-                (TrackState::Lost, LostFallback::Lawn) => {
-                    return Ok(Command::fixed(self.lawn.next_point()))
-                }
+                (TrackState::Lost, LostFallback::Lawn) => return Ok(fixed(self.lawn.next_point())),
                 _ => {}
             }
         }
         Ok(match self.params.guidance {
-            GuidanceKind::Eer => self.plan_eer(t_s, vehicle_enu)?,
-            GuidanceKind::Pfwm => Command::GoTo {
-                position_enu: self.estimator.mean(),
-                velocity_enu: self.confident_velocity(),
-            },
+            GuidanceKind::Eer => Some(self.plan_eer(t_s, vehicle)?),
+            GuidanceKind::Pfwm => Some((self.estimator.mean(), self.confident_velocity())),
             GuidanceKind::Kf => match &self.side_kf {
-                Some(k) => Command::GoTo {
-                    position_enu: k.mean(),
-                    velocity_enu: k.velocity(),
-                },
-                None => Command::GoTo {
-                    position_enu: self.estimator.mean(),
-                    velocity_enu: self.estimator.velocity(),
-                },
+                Some(k) => Some((k.mean(), k.velocity())),
+                None => Some((self.estimator.mean(), self.estimator.velocity())),
             },
-            GuidanceKind::Truth => {
-                let (p, v) = truth.ok_or(TrackerError::NoTruth)?;
-                Command::GoTo {
-                    position_enu: p,
-                    velocity_enu: v,
-                }
-            }
-            GuidanceKind::Lawn => Command::fixed(match self.last_measurement {
+            GuidanceKind::Truth => Some(truth.ok_or(TrackerError::NoTruth)?),
+            GuidanceKind::Lawn => fixed(match self.last_measurement {
                 Some((tm, z)) if t_s - tm <= self.params.lawn.track_measurement_for_s => z,
                 _ => self.lawn.next_point(),
             }),
@@ -131,7 +121,8 @@ impl Tracker {
     /// EER's waypoint is where to be at the end of the horizon; with the target's velocity
     /// (when the belief is concentrated) the setpoint moves so as to get there then, riding
     /// along with the target instead of trailing it.
-    fn plan_eer(&mut self, t_s: f64, vehicle_enu: &Enu2) -> Result<Command, TrackerError> {
+    fn plan_eer(&mut self, t_s: f64, vehicle: &View) -> Result<(Enu2, Enu2), TrackerError> {
+        let vehicle_enu = &vehicle.centre_enu;
         let over_target_velocity_enu = self.confident_velocity();
         let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
         // Searching: EER then keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27").
@@ -149,6 +140,9 @@ impl Tracker {
         self.planner
             .weigh_escape(self.last_measurement.is_none() && self.params.cue.is_some());
         self.planner.set_searching(searching);
+        self.planner.ride_along(
+            (over_target_velocity_enu != Enu2::zeros()).then_some(over_target_velocity_enu),
+        );
         // EER plans with the prediction the filter makes: where the filter re-routes its
         // belief at junctions, so does the rollout. Straight on, the predicted tracks ran
         // off the road past every corner and EER sent the drone there: it overshot the
@@ -159,7 +153,8 @@ impl Tracker {
         let d = self.planner.plan(
             pf,
             model.as_mut(),
-            vehicle_enu,
+            vehicle,
+            &self.params.heading,
             &self.world,
             &mut self.rng_guidance,
         )?;
@@ -176,10 +171,7 @@ impl Tracker {
         } else {
             over_target_velocity_enu
         };
-        Ok(Command::GoTo {
-            position_enu: d.waypoint_enu - velocity_enu * horizon_s,
-            velocity_enu,
-        })
+        Ok((d.waypoint_enu - velocity_enu * horizon_s, velocity_enu))
     }
 }
 

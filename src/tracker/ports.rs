@@ -7,6 +7,7 @@ use nalgebra::Matrix2;
 
 use crate::frames::Enu2;
 use crate::metrics::StepRecord;
+use crate::world::camera::View;
 
 /// What the caller knows at a tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -14,6 +15,9 @@ pub struct TickInput {
     /// Where the vehicle is, world ENU; `None` before its first reported position (the
     /// tick passes and what was due stays due).
     pub vehicle_enu: Option<Enu2>,
+    /// Which way the camera's image faces now, world ENU yaw (rad; [`View::yaw_enu_rad`]):
+    /// the vehicle's heading with the mount's yaw accounted for.
+    pub view_yaw_enu_rad: f64,
     /// The vehicle's state is stale (no heartbeat): no decision is taken on it.
     pub link_lost: bool,
     /// The true target position, world ENU, where a simulator knows it (records and
@@ -35,11 +39,11 @@ pub struct Prior {
 /// What a sensor delivered at a filter step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Observation {
-    /// A frame was taken from `taken_from_enu`; `z` is the target's measured position, world
+    /// A frame was taken from `taken_from`; `z` is the target's measured position, world
     /// ENU, or `None` when the frame did not show it (negative information).
     Frame {
-        /// The vehicle's position when the frame was taken, world ENU.
-        taken_from_enu: Enu2,
+        /// Where the camera was and which way its image faced when the frame was taken.
+        taken_from: View,
         /// The measurement, if the target was seen.
         z: Option<Enu2>,
     },
@@ -52,21 +56,18 @@ pub trait Sensor {
     /// Why an observation could not be made.
     type Error;
 
-    /// The observation for the filter step at `t_s`, made from a vehicle at `vehicle_enu`,
-    /// looking first where `prior` says.
-    fn observe(
-        &mut self,
-        t_s: f64,
-        vehicle_enu: &Enu2,
-        prior: &Prior,
-    ) -> Result<Observation, Self::Error>;
+    /// The observation for the filter step at `t_s`, made from `view` (the vehicle's
+    /// position and the camera's heading), looking first where `prior` says.
+    fn observe(&mut self, t_s: f64, view: &View, prior: &Prior)
+        -> Result<Observation, Self::Error>;
 }
 
 /// What the tracker asks the vehicle to do.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Command {
     /// Fly a moving setpoint at the tracking altitude: at `position_enu` (inside the
-    /// workspace) when the decision is taken, moving at `velocity_enu` from then on; the
+    /// workspace) when the decision is taken, moving at `velocity_enu` from then on, the
+    /// camera's image turned to face `view_yaw_enu_rad`; the
     /// velocity is also the autopilot's feed-forward, so that a vehicle following a moving
     /// target does not trail it by speed / position gain. Zero velocity: a fixed point. The
     /// sink stops the motion at the geofence.
@@ -75,17 +76,21 @@ pub enum Command {
         position_enu: Enu2,
         /// How it moves, world ENU, m/s.
         velocity_enu: Enu2,
+        /// Which way the camera's image should face, world ENU yaw (rad,
+        /// [`View::yaw_enu_rad`]); the sink turns the vehicle (less the mount's yaw).
+        view_yaw_enu_rad: f64,
     },
     /// Stay where it is.
     HoldHere,
 }
 
 impl Command {
-    /// A fixed point.
-    pub fn fixed(position_enu: Enu2) -> Self {
+    /// A fixed point, the view facing `view_yaw_enu_rad`.
+    pub fn fixed(position_enu: Enu2, view_yaw_enu_rad: f64) -> Self {
         Self::GoTo {
             position_enu,
             velocity_enu: Enu2::zeros(),
+            view_yaw_enu_rad,
         }
     }
 }

@@ -12,13 +12,13 @@ struct Scripted {
 
 impl Sensor for Scripted {
     type Error = std::convert::Infallible;
-    fn observe(&mut self, _t: f64, v: &Enu2, _p: &Prior) -> Result<Observation, Self::Error> {
+    fn observe(&mut self, _t: f64, v: &View, _p: &Prior) -> Result<Observation, Self::Error> {
         self.calls += 1;
         Ok(if self.frozen {
             Observation::NoFrame
         } else {
             Observation::Frame {
-                taken_from_enu: *v,
+                taken_from: *v,
                 z: self.z,
             }
         })
@@ -66,6 +66,7 @@ fn outdoor_config() -> Config {
 fn input(v: Enu2) -> TickInput {
     TickInput {
         vehicle_enu: Some(v),
+        view_yaw_enu_rad: crate::world::camera::NORTH_VIEW_YAW_ENU_RAD,
         link_lost: false,
         truth_enu: Some(Enu2::new(0.5, 0.5)),
         truth_velocity_enu: Enu2::zeros(),
@@ -389,7 +390,7 @@ fn field_grid() -> Config {
 /// One filter step at `t_s` of a frame taken from `camera`, with or without the target.
 fn frame(t: &mut Tracker, t_s: f64, camera: Enu2, z: Option<Enu2>) {
     let observation = Observation::Frame {
-        taken_from_enu: camera,
+        taken_from: View::north(camera),
         z,
     };
     t.update(t_s, observation, &input(camera), &FrozenClock)
@@ -527,7 +528,7 @@ fn never_seen_while_watching(camera: Enu2, for_s: f64) -> (f64, f64) {
     let view = Enu2::new(220.0, 0.0);
     let (mut in_view, mut beyond) = (0.0, 0.0);
     for (p, w) in pf.particles().iter().zip(pf.weights()) {
-        if c.world().footprint.contains(&view, p) {
+        if c.world().footprint.contains(&View::north(view), p) {
             in_view += w;
         } else if p.x > 251.0 && p.y.abs() < 5.0 {
             beyond += w;

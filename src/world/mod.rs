@@ -7,7 +7,7 @@ pub mod measurement;
 pub mod road;
 pub mod signature;
 
-use camera::Footprint;
+use camera::{Footprint, View};
 use geometry::{BoundsEnu, Enu2, PolygonEnu};
 use measurement::MeasurementModel;
 use road::RoadNetwork;
@@ -63,22 +63,22 @@ impl World {
         self.occlusions.iter().any(|o| o.contains(p))
     }
 
-    /// Whether a target at `target` is seen by an agent at `agent`: inside the footprint
-    /// and outside every occlusion (the paper's x in S and not in O).
-    pub fn is_visible(&self, agent: &Enu2, target: &Enu2) -> bool {
-        self.footprint.contains(agent, target) && !self.is_occluded(target)
+    /// Whether a target at `target` is seen from `view`: inside the footprint and outside
+    /// every occlusion (the paper's x in S and not in O).
+    pub fn is_visible(&self, view: &View, target: &Enu2) -> bool {
+        self.footprint.contains(view, target) && !self.is_occluded(target)
     }
 
-    /// Whether a target at `target` shows its whole tag to an agent at `agent`: its centre
+    /// Whether a target at `target` shows its whole tag to `view`: its centre
     /// at least the detection margin inside the footprint and away from every occlusion.
     /// Only there does a frame without a detection say the target is not there (negative
     /// information); a tag cut by the image's edge or half under a roof is missed by the
     /// detector (eight PX4 SIH lab flights: 98 of 118 misses of a target in view and clear
     /// of occlusions had its centre within 0.071 m of the edge, half the 0.1 m tag's
     /// diagonal).
-    pub fn is_wholly_visible(&self, agent: &Enu2, target: &Enu2) -> bool {
+    pub fn is_wholly_visible(&self, view: &View, target: &Enu2) -> bool {
         self.footprint
-            .contains_inset(agent, target, self.detection_margin_m)
+            .contains_inset(view, target, self.detection_margin_m)
             && !self.may_hide_the_tag(target)
     }
 
@@ -99,20 +99,20 @@ mod tests {
     fn a_whole_tag_is_seen_only_clear_of_the_edge_and_of_every_occlusion() {
         let plain = Config::default_lab().world();
         let w = plain.clone().with_detection_margin(0.07);
-        let agent = Enu2::new(-2.0, 1.5);
+        let agent = View::north(Enu2::new(-2.0, 1.5));
         let half = w.footprint.half_width_m;
         // Near the east edge: in view, but the tag may be cut off.
-        let edge = Enu2::new(agent.x + half - 0.03, agent.y);
+        let edge = Enu2::new(-2.0 + half - 0.03, 1.5);
         assert!(w.is_visible(&agent, &edge) && !w.is_wholly_visible(&agent, &edge));
-        let inside = Enu2::new(agent.x + half - 0.1, agent.y);
+        let inside = Enu2::new(-2.0 + half - 0.1, 1.5);
         assert!(w.is_wholly_visible(&agent, &inside));
         // The same at the north edge, and with no margin the band is in view.
-        let north = Enu2::new(agent.x, agent.y + w.footprint.half_height_m - 0.05);
+        let north = Enu2::new(-2.0, 1.5 + w.footprint.half_height_m - 0.05);
         assert!(!w.is_wholly_visible(&agent, &north));
         assert!(plain.is_wholly_visible(&agent, &north) && plain.is_visible(&agent, &north));
         // Occlusion "between B and C" spans x -0.15..0.85: 0.05 m west of it a tag is
         // half under it; 0.1 m west it is clear.
-        let over = Enu2::new(0.0, 0.2);
+        let over = View::north(Enu2::new(0.0, 0.2));
         assert!(!w.is_wholly_visible(&over, &Enu2::new(-0.2, 0.2)));
         assert!(w.is_visible(&over, &Enu2::new(-0.2, 0.2)));
         assert!(w.is_wholly_visible(&over, &Enu2::new(-0.25, 0.2)));

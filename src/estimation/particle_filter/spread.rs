@@ -77,7 +77,7 @@ impl ParticleFilter {
         start: RouteStart<'_>,
         speeds_mps: std::ops::RangeInclusive<f64>,
         driven_s: f64,
-        looked: &[(f64, Enu2)],
+        looked: &[(f64, View)],
         rng: &mut R,
     ) -> bool {
         let n = self.weights.len();

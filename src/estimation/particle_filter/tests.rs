@@ -59,7 +59,7 @@ fn tracks_north(n: usize, k: usize, dt_s: f64, end: Enu2, speed_mps: f64) -> His
 
 fn mass_inside(pf: &ParticleFilter, world: &World, agent: &Enu2) -> f64 {
     (0..pf.weights().len())
-        .filter(|&i| world.is_wholly_visible(agent, &pf.particle(i)))
+        .filter(|&i| world.is_wholly_visible(&View::north(*agent), &pf.particle(i)))
         .map(|i| pf.weights()[i])
         .sum()
 }
@@ -105,7 +105,8 @@ fn negative_information_lowers_the_mass_inside_the_footprint() {
     let before = mass_inside(&pf, &world, &agent);
     assert!(before > 0.01, "some particles start in view: {before}");
     let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
-    pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+    pf.step(&mut model, None, &View::north(agent), &world, &mut rng)
+        .unwrap();
     let after = mass_inside(&pf, &world, &agent);
     assert!(after < 0.2 * before, "before {before}, after {after}");
 }
@@ -122,17 +123,19 @@ fn a_miss_through_the_detector_says_nothing_where_the_tag_could_be_cut_off() {
     assert!((seen.detection_margin_m - 0.1 / 2f64.sqrt()).abs() < 1e-12);
     let miss = c.filter_params().miss_probability;
     let (mut through_detector, mut analytic) = (pf.clone(), pf.clone());
-    through_detector.update(None, &agent, &seen, false);
-    analytic.update(None, &agent, &plain, false);
+    through_detector.update(None, &View::north(agent), &seen, false);
+    analytic.update(None, &View::north(agent), &plain, false);
     let (mut band, mut inside) = (0, 0);
     for i in 0..pf.weights().len() {
         let p = pf.particle(i);
         let (d, a) = (through_detector.weights()[i], analytic.weights()[i]);
-        if plain.is_visible(&agent, &p) && !seen.is_wholly_visible(&agent, &p) {
+        if plain.is_visible(&View::north(agent), &p)
+            && !seen.is_wholly_visible(&View::north(agent), &p)
+        {
             band += 1;
             assert!((a - d * miss).abs() <= 1e-12 * d, "{p}: {d} vs {a}");
         } else {
-            inside += usize::from(seen.is_wholly_visible(&agent, &p));
+            inside += usize::from(seen.is_wholly_visible(&View::north(agent), &p));
             assert_eq!(d, a, "{p}");
         }
     }
@@ -156,7 +159,9 @@ fn negative_information_does_not_apply_inside_occlusions() {
     let before = hidden_mass(&pf);
     let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
     pf.set_weights(&vec![1.0; 2000]);
-    let _ = pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+    let _ = pf
+        .step(&mut model, None, &View::north(agent), &world, &mut rng)
+        .unwrap();
     let after = hidden_mass(&pf);
     // The footprint (0.84 m) lies inside the 1 m occlusion, so nothing is visible and the
     // hidden mass cannot drop by the miss probability.
@@ -170,7 +175,7 @@ fn measurement_pulls_the_estimate_to_the_target() {
     let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
     for _ in 0..6 {
         let z = world.measurement.measure(&target, &mut rng);
-        pf.step(&mut model, Some(z), &target, &world, &mut rng)
+        pf.step(&mut model, Some(z), &View::north(target), &world, &mut rng)
             .unwrap();
     }
     // With a = 0.99 and b = 0.4 the filter often re-seeds around the newest measurement,
@@ -220,7 +225,13 @@ fn resampling_copies_whole_histories() {
 fn nonfinite_model_outputs_are_never_taken_in() {
     let (_, world, mut pf, mut rng) = setup(100);
     let r = pf
-        .step(&mut Broken, None, &Enu2::new(-2.0, 1.5), &world, &mut rng)
+        .step(
+            &mut Broken,
+            None,
+            &View::north(Enu2::new(-2.0, 1.5)),
+            &world,
+            &mut rng,
+        )
         .unwrap();
     assert_eq!(r.nonfinite_predictions, 50);
     assert!(pf
@@ -240,11 +251,12 @@ fn all_particles_in_view_without_a_detection_stays_normalised() {
     let mut model = ConstantVelocity::new(0.0, c.filter_dt_s());
     for _ in 0..5 {
         let z = world.measurement.measure(&target, &mut rng);
-        pf.step(&mut model, Some(z), &agent, &world, &mut rng)
+        pf.step(&mut model, Some(z), &View::north(agent), &world, &mut rng)
             .unwrap();
     }
     for _ in 0..20 {
-        pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+        pf.step(&mut model, None, &View::north(agent), &world, &mut rng)
+            .unwrap();
         let s: f64 = pf.weights().iter().sum();
         assert!((s - 1.0).abs() < 1e-9 && pf.weights().iter().all(|w| w.is_finite()));
     }
@@ -257,13 +269,19 @@ fn a_far_measurement_reseeds_instead_of_underflowing() {
     let here = Enu2::new(-2.5, 1.8);
     for _ in 0..5 {
         let z = world.measurement.measure(&here, &mut rng);
-        pf.step(&mut model, Some(z), &here, &world, &mut rng)
+        pf.step(&mut model, Some(z), &View::north(here), &world, &mut rng)
             .unwrap();
     }
     // The target jumps 4 m: every likelihood underflows in the linear domain.
     let there = Enu2::new(0.8, -1.0);
     let r = pf
-        .step(&mut model, Some(there), &there, &world, &mut rng)
+        .step(
+            &mut model,
+            Some(there),
+            &View::north(there),
+            &world,
+            &mut rng,
+        )
         .unwrap();
     assert!(matches!(
         r.action,
@@ -341,7 +359,13 @@ fn history_length_mismatch_is_a_clear_error() {
     }
     let (_, world, mut pf, mut rng) = setup(10);
     let err = pf
-        .step(&mut NeedsTen, None, &Enu2::zeros(), &world, &mut rng)
+        .step(
+            &mut NeedsTen,
+            None,
+            &View::north(Enu2::zeros()),
+            &world,
+            &mut rng,
+        )
         .unwrap_err();
     assert!(err.to_string().contains("12"), "{err}");
 }
@@ -354,7 +378,8 @@ fn same_seed_same_filter() {
         for k in 0..30 {
             let t = Enu2::new(-1.0 + 0.03 * k as f64, 0.5);
             let z = (k % 3 == 0).then(|| world.measurement.measure(&t, &mut rng));
-            pf.step(&mut model, z, &t, &world, &mut rng).unwrap();
+            pf.step(&mut model, z, &View::north(t), &world, &mut rng)
+                .unwrap();
         }
         (pf.mean(), pf.covariance())
     };
@@ -375,7 +400,7 @@ proptest! {
         for (measured, x, y) in events {
             let p = Enu2::new(x, y);
             let z = measured.then_some(p);
-            pf.step(&mut model, z, &p, &world, &mut rng).unwrap();
+            pf.step(&mut model, z, &View::north(p), &world, &mut rng).unwrap();
             let s: f64 = pf.weights().iter().sum();
             prop_assert!((s - 1.0).abs() < 1e-9, "sum {}", s);
             prop_assert!(pf.weights().iter().all(|w| w.is_finite() && *w >= 0.0));
@@ -398,7 +423,8 @@ fn a_blind_step_predicts_without_negative_information() {
     // unlike a step with no measurement (negative information).
     let blind = mass_inside(&pf, &world, &agent);
     assert!((blind - before).abs() < 0.05, "{before} -> {blind}");
-    pf.step(&mut model, None, &agent, &world, &mut rng).unwrap();
+    pf.step(&mut model, None, &View::north(agent), &world, &mut rng)
+        .unwrap();
     assert!(mass_inside(&pf, &world, &agent) < 0.5 * blind);
 }
 
@@ -512,7 +538,12 @@ fn one_way_road_tracks() -> (Config, World, ParticleFilter) {
 /// detection and nothing in view (`headings`: the motion model does not know the roads).
 fn weights_by_track(pf: &mut ParticleFilter, world: &World, headings: bool) -> [f64; 3] {
     // Far from the road: the footprint holds no particle, only the road constraint acts.
-    pf.update(None, &Enu2::new(1300.0, 900.0), world, headings);
+    pf.update(
+        None,
+        &View::north(Enu2::new(1300.0, 900.0)),
+        world,
+        headings,
+    );
     let (mut sums, mut counts) = ([0.0; 3], [0.0; 3]);
     for (i, w) in pf.weights().iter().enumerate() {
         sums[i % 3] += w;
@@ -602,8 +633,8 @@ fn a_spread_along_routes_keeps_out_what_the_empty_frames_ruled_out() {
     }
     // A camera over the east exit (550, 0) from 3 s on saw nothing: every eastbound route
     // drove through its view, no northbound one did.
-    let looked: Vec<(f64, Enu2)> = (9..=30)
-        .map(|j| (j as f64 / 3.0, Enu2::new(550.0, 0.0)))
+    let looked: Vec<(f64, View)> = (9..=30)
+        .map(|j| (j as f64 / 3.0, View::north(Enu2::new(550.0, 0.0))))
         .collect();
     assert!(pf.spread_along_routes(&world, start, 8.4..=15.6, 10.0, &looked, &mut rng));
     let (north, east) = branch_weights(&pf);
@@ -680,7 +711,7 @@ fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
     let z = Enu2::new(466.0, 0.0);
     let start = RouteStart::At(z, Some(Enu2::new(10.0, 0.0)));
     // Two seconds on, every route is under the overpass, short of its junction at x = 500.
-    let looked: Vec<(f64, Enu2)> = (1..=6).map(|j| (j as f64 / 3.0, z)).collect();
+    let looked: Vec<(f64, View)> = (1..=6).map(|j| (j as f64 / 3.0, View::north(z))).collect();
     assert!(pf.spread_along_routes(&world, start, 7.0..=13.0, 2.0, &looked, &mut rng));
     let slower = weight_slower_than(&pf, 11.0, dt);
     assert!(slower > 0.2, "weight on routes under 11 m/s: {slower}");
@@ -693,7 +724,7 @@ fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
     assert_eq!((h.k_in(), dt), (10, 1.0 / 3.0));
     let mut refuted = 0;
     for (i, w) in pf.weights().iter().enumerate() {
-        if world.is_wholly_visible(&z, &h.at(i, 4)) {
+        if world.is_wholly_visible(&View::north(z), &h.at(i, 4)) {
             refuted += 1;
             assert!(*w < 1e-6, "{} {w}", h.at(i, 4));
         }

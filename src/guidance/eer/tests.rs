@@ -182,7 +182,14 @@ fn planner_waypoints_stay_inside_the_geofence_and_count_candidates() {
         Enu2::new(-1.0, 0.5),
     ] {
         let d = planner
-            .plan(&pf, &mut model, &agent, &world, &mut rng)
+            .plan(
+                &pf,
+                &mut model,
+                &View::north(agent),
+                &HeadingRule::north(),
+                &world,
+                &mut rng,
+            )
             .unwrap();
         assert!(
             c.workspace_enu.contains(&d.waypoint_enu),
@@ -373,8 +380,9 @@ fn fast_eer_with_leads_equals_reference_in(world: &World, c: &Config) {
     let cands = candidates(&inp, &agent, 0.6, ReachShape::Square, 4, world);
     let leads: Vec<f64> = (0..cands.len()).map(|_| rng.gen_range(0.0..3.0)).collect();
     let mut scratch = EerScratch::default();
-    let (_, fast) = evaluate_fast_led(&inp, &cands, &leads, world, &kernel, 0.1, &mut scratch);
-    let (_, reference) = evaluate_reference_led(&inp, &cands, &leads, world, &kernel, 0.1);
+    let views = north_views(&cands);
+    let (_, fast) = evaluate_fast_led(&inp, &views, &leads, world, &kernel, 0.1, &mut scratch);
+    let (_, reference) = evaluate_reference_led(&inp, &views, &leads, world, &kernel, 0.1);
     for (a, b) in fast.iter().zip(&reference) {
         assert!((a - b).abs() < 1e-9, "fast {a} vs reference {b}");
     }
@@ -421,7 +429,7 @@ fn far_candidates_are_where_the_agent_meets_the_particles() {
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let (_, eer) = evaluate_fast_led(
         &inp,
-        &cands,
+        &north_views(&cands),
         &leads,
         &world,
         &kernel,
@@ -594,7 +602,14 @@ fn a_search_keeps_to_its_mode_unless_another_is_clearly_better() {
     let mut plan = |planner: &mut EerPlanner, pf: &mut ParticleFilter, shares: (f64, f64)| {
         assert!(pf.set_weights(&weigh(shares.0, shares.1)));
         planner
-            .plan(pf, &mut model, &agent, &world, &mut rng)
+            .plan(
+                pf,
+                &mut model,
+                &View::north(agent),
+                &HeadingRule::north(),
+                &world,
+                &mut rng,
+            )
             .unwrap()
     };
 
@@ -639,7 +654,7 @@ fn the_escape_weighting_applies_only_when_the_tracker_turns_it_on() {
         if on {
             weigh_by_escape(&mut expected, &agent, params.search_escape_floor);
         }
-        planner.decide(&agent, &world);
+        planner.decide(&View::north(agent), &HeadingRule::north(), &world);
         assert_eq!(planner.inputs().weights, expected.weights, "on = {on}");
         assert_eq!(planner.inputs().alpha, expected.alpha, "on = {on}");
     }
@@ -651,6 +666,6 @@ fn the_escape_weighting_applies_only_when_the_tracker_turns_it_on() {
         .unwrap()
         .weights
         .clone();
-    weighed.decide(&agent, &world);
+    weighed.decide(&View::north(agent), &HeadingRule::north(), &world);
     assert_ne!(weighed.inputs().weights, before);
 }

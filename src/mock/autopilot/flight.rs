@@ -95,6 +95,7 @@ impl MockAutopilot {
             return;
         }
         self.advance_wander(dt);
+        self.turn(dt);
         let target = self.target_ned_m.map(|t| {
             if self.taking_off {
                 t
@@ -117,6 +118,22 @@ impl MockAutopilot {
             taking_off: self.taking_off,
         };
         self.state.step(&cmd, limits, &r, dt);
+    }
+
+    /// Turns `dt` toward the asked heading the short way round at the firmware's auto yaw
+    /// rate: PX4 MPC_YAWRAUTO_MAX (deg/s, default 45), ArduCopter ATC_SLEW_YAW (cdeg/s,
+    /// default 6000). Both turn a position target's yaw at a limited rate, not at once.
+    pub(super) fn turn(&mut self, dt: f64) {
+        let rate_rad_s = match self.cfg.flavor {
+            Flavor::Px4 => self.params.get("MPC_YAWRAUTO_MAX", 45.0).to_radians(),
+            Flavor::ArduPilot => (self.params.get("ATC_SLEW_YAW", 6000.0) / 100.0).to_radians(),
+        };
+        let step = rate_rad_s.max(0.0) * dt;
+        let to_go = crate::frames::wrap_angle(self.yaw_target_ned_rad - self.yaw_ned_rad);
+        if to_go != 0.0 {
+            self.yaw_ned_rad =
+                crate::frames::wrap_angle(self.yaw_ned_rad + to_go.clamp(-step, step));
+        }
     }
 
     /// One step of the wander's Gauss-Markov process (exact for any `dt`).

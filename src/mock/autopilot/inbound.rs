@@ -248,7 +248,7 @@ impl MockAutopilot {
             .contains(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE)
             && sp.yaw.is_finite()
         {
-            self.yaw_ned_rad = sp.yaw as f64;
+            self.yaw_target_ned_rad = sp.yaw as f64;
         }
         match self.cfg.flavor {
             Flavor::Px4 => {

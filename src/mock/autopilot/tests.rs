@@ -589,3 +589,52 @@ fn a_landing_vehicle_disarms_a_moment_after_touchdown() {
         );
     }
 }
+
+/// A position target's yaw is turned to at the firmware's auto yaw rate, not at once (PX4
+/// MPC_YAWRAUTO_MAX 45 deg/s; ArduCopter ATC_SLEW_YAW 60 deg/s): the companion's model of
+/// the camera's view must follow the heading the vehicle reports, not the one it asked for.
+#[test]
+fn a_setpoint_yaw_is_turned_to_at_the_auto_yaw_rate() {
+    let mut m = MockAutopilot::new(MockConfig::new(Flavor::Px4), 0.0);
+    let t = stream(&mut m, 0.1, 1.5, Some([0.0, 0.0, -10.0]));
+    assert_eq!(
+        set_mode(&mut m, t, Mode::Offboard),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(arm(&mut m, t), MavResult::MAV_RESULT_ACCEPTED);
+    let mut t = stream(&mut m, t, t + 8.0, Some([0.0, 0.0, -10.0]));
+    assert_eq!(m.yaw_ned_rad, 0.0);
+    let turn = MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        z: -10.0,
+        yaw: 1.5,
+        // Position and yaw (3576 less YAW_IGNORE).
+        type_mask: PositionTargetTypemask::from_bits_truncate(2552),
+        target_system: 1,
+        target_component: 1,
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
+        ..Default::default()
+    });
+    let started = t;
+    while t < started + 1.0 - 1e-9 {
+        t += 0.05;
+        m.handle(t, &GCS, &turn);
+        m.tick(t);
+    }
+    let after_1s = m.yaw_ned_rad;
+    assert!((after_1s - 45f64.to_radians()).abs() < 0.06, "{after_1s}");
+    while t < started + 3.0 {
+        t += 0.05;
+        m.handle(t, &GCS, &turn);
+        m.tick(t);
+    }
+    assert!((m.yaw_ned_rad - 1.5).abs() < 1e-6, "{}", m.yaw_ned_rad);
+    // ArduCopter's slew: 60 deg/s, the short way round (0 to -2 rad: toward negative yaw).
+    let mut a = MockAutopilot::new(MockConfig::new(Flavor::ArduPilot), 0.0);
+    a.yaw_target_ned_rad = -2.0;
+    a.turn(1.0);
+    assert!(
+        (a.yaw_ned_rad + 60f64.to_radians()).abs() < 1e-9,
+        "{}",
+        a.yaw_ned_rad
+    );
+}
