@@ -391,6 +391,66 @@ fn fast_eer_with_leads_equals_reference_in(world: &World, c: &Config) {
     assert!(fast.iter().zip(&unled).any(|(a, b)| (a - b).abs() > 1e-6));
 }
 
+/// Turned views: the fast evaluation equals the reference's at any heading, and a turn
+/// changes what a candidate sees.
+#[test]
+fn fast_eer_of_turned_views_equals_reference() {
+    let c = Config::default_lab();
+    let world = c.world_seen_by_detector();
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let mut rng = CoreRng::seed_from_u64(23);
+    let inp = random_inputs(&mut rng, 14, 2, &world);
+    let agent = Enu2::new(-0.5, 0.4);
+    let cands = candidates(&inp, &agent, 0.6, ReachShape::Square, 4, &world);
+    let views: Vec<View> = cands
+        .iter()
+        .map(|c| View::new(*c, rng.gen_range(-3.1..3.1)))
+        .collect();
+    let mut scratch = EerScratch::default();
+    let (_, fast) = evaluate_fast_led(&inp, &views, &[], &world, &kernel, 0.1, &mut scratch);
+    let (_, reference) = evaluate_reference_led(&inp, &views, &[], &world, &kernel, 0.1);
+    for (a, b) in fast.iter().zip(&reference) {
+        assert!((a - b).abs() < 1e-9, "fast {a} vs reference {b}");
+    }
+    let (_, north) = evaluate_fast(&inp, &cands, &world, &kernel, 0.1, &mut scratch);
+    assert!(fast.iter().zip(&north).any(|(a, b)| (a - b).abs() > 1e-6));
+}
+
+/// A belief along a north-south road, 50 m long, under a 58 x 31 m view: turned with its
+/// long side along the road the view holds all of it, facing north only the middle 31 m.
+/// EER values the turned view more (what `view_heading = "along_track"` flies).
+#[test]
+fn eer_prefers_the_view_that_lies_along_the_belief() {
+    let c =
+        Config::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml"))
+            .unwrap();
+    let mut world = c.world();
+    world.occlusions.clear();
+    assert!(world.footprint.half_width_m > 26.0 && world.footprint.half_height_m < 20.0);
+    let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
+    let mut rng = CoreRng::seed_from_u64(5);
+    let centre = Enu2::new(100.0, 50.0);
+    let mut inp = EerInputs {
+        n_m: 1,
+        ..Default::default()
+    };
+    let n = 40;
+    for k in 0..n {
+        let p = centre + Enu2::new(rng.gen_range(-1.0..1.0), -25.0 + 50.0 * k as f64 / n as f64);
+        inp.current.push(p);
+        inp.predicted.push(p);
+        inp.weights.push(1.0 / n as f64);
+        inp.measurements
+            .push(world.measurement.measure(&p, &mut rng));
+        inp.alpha.push(1.0 / n as f64);
+    }
+    // Facing east (the width north-south, along the road), facing north (the paper's).
+    let views = [View::new(centre, 0.0), View::north(centre)];
+    let mut scratch = EerScratch::default();
+    let (_, eer) = evaluate_fast_led(&inp, &views, &[], &world, &kernel, 1e-3, &mut scratch);
+    assert!(eer[0] > eer[1] + 0.1, "{eer:?}");
+}
+
 /// At field scale, a car 300 m away driving on at 10 m/s: with intercepts the far
 /// candidates are where a 15 m/s drone meets it, ahead of where the car is at the horizon's
 /// end, and EER's waypoint is one of them; the paper's candidates are the particles where
