@@ -1,5 +1,6 @@
 use super::*;
 use crate::config::Config;
+use crate::guidance::ViewHeading;
 use crate::rng::{stream_rng, Stream};
 
 /// A sensor that sees the target wherever it is told it is, always from where the vehicle
@@ -314,6 +315,56 @@ fn eer_over_a_concentrated_belief_moves_with_the_target() {
         (velocity_enu - Enu2::new(10.0, 0.0)).norm() < 1.5,
         "{velocity_enu}"
     );
+}
+
+/// Following a car driving north (the road x = 1200 m): under `view_heading = "north"` every
+/// command faces north; under `along_track` the view turns its long side (the image's
+/// width) along the car's track, north-south, whichever law plans (EER or the mean).
+#[test]
+fn the_view_heading_rule_turns_the_commands_view_along_the_track() {
+    for (rule, law) in [
+        (ViewHeading::North, GuidanceKind::Pfwm),
+        (ViewHeading::AlongTrack, GuidanceKind::Pfwm),
+        (ViewHeading::AlongTrack, GuidanceKind::Eer),
+    ] {
+        let mut c = outdoor_config();
+        c.guidance.view_heading = Some(rule);
+        let mut t = tracker(&c, law, false);
+        let mut yaws = Vec::new();
+        let mut y = 100.0;
+        for _ in 0..(c.timing.physics_hz * 10.0) as usize {
+            y += 10.0 / c.timing.physics_hz;
+            let mut s = Scripted {
+                z: Some(Enu2::new(1200.0, y)),
+                frozen: false,
+                calls: 0,
+            };
+            let out = t
+                .tick(&input(Enu2::new(1200.0, y - 3.0)), &mut s, &FrozenClock)
+                .unwrap();
+            if let Some(Decision::Command {
+                command: Command::GoTo {
+                    view_yaw_enu_rad, ..
+                },
+                ..
+            }) = out.decision
+            {
+                yaws.push(view_yaw_enu_rad);
+            }
+        }
+        assert!(yaws.len() >= 5, "{rule:?} {law}");
+        let last = *yaws.last().unwrap();
+        match rule {
+            ViewHeading::North => assert!(yaws
+                .iter()
+                .all(|y| *y == crate::world::camera::NORTH_VIEW_YAW_ENU_RAD)),
+            // The image's top east or west: its width north-south, along the road.
+            ViewHeading::AlongTrack => assert!(
+                crate::frames::wrap_angle(2.0 * last).abs() < 0.3,
+                "{law}: {yaws:?}"
+            ),
+        }
+    }
 }
 
 /// A waypoint beyond the reachable grid's corners (sqrt(2) x reach) is approached at the top
