@@ -286,15 +286,54 @@ fn outdoor_closed_loop_keeps_the_car_in_view() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml");
     let mut cfg = Config::load(&path).unwrap();
     cfg.motion.onnxruntime_library = lab().motion.onnxruntime_library;
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("link.tlog");
     let r = daemon::run_simulated(
         &cfg,
         &RunOptions {
             seed: 2,
             motion: "cv".into(),
-            ..opts(120.0, None)
+            ..opts(120.0, Some(log.clone()))
         },
     )
     .unwrap();
+    // With a cue the view turns its long side along the track (`guidance.view_heading`
+    // absent: `along_track`): the setpoints ask for more than one heading, and the mock,
+    // as PX4 does, turns to them at MPC_YAWRAUTO_MAX (45 deg/s), never faster.
+    let msgs = tlog::read(&log).unwrap();
+    let asked: Vec<f32> = msgs
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(s) => Some(s.yaw),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        asked.iter().any(|y| (y - asked[0]).abs() > 0.3),
+        "one heading only: {}",
+        asked[0]
+    );
+    let attitude: Vec<(u64, f32)> = msgs
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            MavMessage::ATTITUDE(a) => Some((u64::from(a.time_boot_ms), a.yaw)),
+            _ => None,
+        })
+        .collect();
+    assert!(
+        attitude
+            .iter()
+            .any(|(_, y)| (y - attitude[0].1).abs() > 0.3),
+        "the vehicle never turned"
+    );
+    for w in attitude.windows(2) {
+        let dt_s = (w[1].0 - w[0].0) as f64 / 1e3;
+        let turn = infotrack::frames::wrap_angle(f64::from(w[1].1 - w[0].1)).abs();
+        assert!(
+            turn <= 45f64.to_radians() * dt_s + 1e-3,
+            "turned {turn} rad in {dt_s} s"
+        );
+    }
     let s = &r.summary;
     let frames = r.output.vision;
     eprintln!(

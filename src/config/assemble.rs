@@ -202,11 +202,17 @@ impl Config {
         }
     }
 
-    /// Which way the view turns (`guidance.view_heading`): a hover within a quarter view of
-    /// its setpoint keeps its heading.
+    /// Which way the view turns (`guidance.view_heading`; absent, `along_track` for a field
+    /// flight from an operator's cue, `north` for the paper's lab, which has none): a hover
+    /// within a quarter view of its setpoint keeps its heading.
     pub fn heading_rule(&self) -> HeadingRule {
+        let default = if self.acquisition.is_some() {
+            ViewHeading::AlongTrack
+        } else {
+            ViewHeading::North
+        };
         HeadingRule {
-            kind: self.guidance.view_heading.unwrap_or(ViewHeading::North),
+            kind: self.guidance.view_heading.unwrap_or(default),
             settle_m: self.footprint().quarter_view_m(),
         }
     }

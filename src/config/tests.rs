@@ -386,3 +386,37 @@ fn the_intercept_lead_is_optional_and_a_bad_one_is_named() {
         assert!(msg.contains("guidance.intercept_within_s"), "{msg}");
     }
 }
+
+/// `guidance.view_heading`: absent, the lab (no cue) keeps the paper's constant heading and
+/// a flight from an operator's cue turns the view along the track; a value is kept; a
+/// wrong one is refused naming the key and the names it takes.
+#[test]
+fn the_view_heading_defaults_by_the_cue_and_a_wrong_one_is_refused() {
+    use crate::guidance::ViewHeading;
+    assert_eq!(
+        Config::default_lab().heading_rule().kind,
+        ViewHeading::North
+    );
+    let outdoor =
+        Config::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml")).unwrap();
+    assert!(outdoor.acquisition.is_some());
+    assert_eq!(outdoor.heading_rule().kind, ViewHeading::AlongTrack);
+    let mut north = outdoor.clone();
+    north.guidance.view_heading = Some(ViewHeading::North);
+    assert_eq!(north.heading_rule().kind, ViewHeading::North);
+    let set = load_modified(|t| {
+        tbl(t, "guidance").insert("view_heading".into(), "along_track".into());
+    })
+    .unwrap();
+    assert_eq!(set.heading_rule().kind, ViewHeading::AlongTrack);
+    let err = load_modified(|t| {
+        tbl(t, "guidance").insert("view_heading".into(), "nose".into());
+    })
+    .unwrap_err()
+    .to_string();
+    // The parser's message: the line, the key, the value and the names it takes.
+    assert!(
+        err.contains("view_heading = \"nose\"") && err.contains("along_track"),
+        "{err}"
+    );
+}
