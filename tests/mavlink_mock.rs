@@ -224,6 +224,32 @@ async fn setpoints_outside_the_geofence_are_refused() {
     assert!(link.set_setpoint(p, 0.0).is_err());
 }
 
+/// A setpoint with a NaN anywhere (position, velocity, the heading the view asks for) is
+/// refused, with or without a geofence, and a finite one is accepted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn non_finite_setpoints_are_refused() {
+    let port = free_udp_port();
+    let link = VehicleLink::connect(LinkConfig::new(&format!("udpout:127.0.0.1:{port}")))
+        .await
+        .unwrap();
+    let p = PositionEnu {
+        x_east_m: 1.0,
+        y_north_m: 2.0,
+        z_up_m: 5.0,
+    };
+    let v = infotrack::world::geometry::Enu2::new(1.0, 0.0);
+    assert!(link.set_moving_setpoint(p, v, 0.3).is_ok());
+    assert!(link.set_moving_setpoint(p, v, f64::NAN).is_err());
+    let nan_v = infotrack::world::geometry::Enu2::new(f64::NAN, 0.0);
+    assert!(link.set_moving_setpoint(p, nan_v, 0.3).is_err());
+    let nan_p = PositionEnu {
+        x_east_m: f64::NAN,
+        ..p
+    };
+    let e = link.set_setpoint(nan_p, 0.3).unwrap_err().to_string();
+    assert!(e.contains("non-finite"), "{e}");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn unknown_parameters_are_reported() {
     let (_mock, link) = setup(Flavor::Px4, 0.0, 1).await;

@@ -123,8 +123,8 @@ pub enum LinkError {
         /// North, m.
         y: f64,
     },
-    /// A setpoint with a NaN or infinite coordinate was asked for (never sent).
-    #[error("setpoint with a non-finite position or velocity refused")]
+    /// A setpoint with a NaN or infinite coordinate or heading was asked for (never sent).
+    #[error("setpoint with a non-finite position, velocity or yaw refused")]
     NonFiniteSetpoint,
     /// Sending failed.
     #[error("MAVLink send failed: {0}")]
@@ -612,7 +612,17 @@ impl VehicleLink {
                 });
             }
         }
-        if !(velocity_enu.x.is_finite() && velocity_enu.y.is_finite()) {
+        let finite = [
+            p.x_east_m,
+            p.y_north_m,
+            p.z_up_m,
+            velocity_enu.x,
+            velocity_enu.y,
+            yaw_enu_rad,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        if !finite {
             return Err(LinkError::NonFiniteSetpoint);
         }
         let v = PositionEnu::from_xy(&velocity_enu, 0.0).to_ned();
