@@ -156,7 +156,7 @@ async fn take_off_to_start(cfg: &Config, link: &VehicleLink) -> Result<(), LinkE
         y_north_m: cfg.agent.start_enu_m[1],
         z_up_m: cfg.agent.altitude_m,
     };
-    link.set_setpoint(start, heading::flown_yaw_enu_rad(cfg))?;
+    link.set_setpoint(start, heading::start_yaw_enu_rad(cfg))?;
     let want = start.to_ned();
     let tol = cfg.start_tolerance_m();
     let mut close_since: Option<Instant> = None;

@@ -1,22 +1,18 @@
-//! The heading the daemon flies: the one the tracker's footprint is drawn for.
+//! Between the camera's view and the vehicle's nose.
 //!
-//! The tracker thinks in the camera's view ([`View`]: which way its image's top faces); the
-//! vehicle flies its nose. A camera turned on its mount by yaw psi faces the nose's heading
-//! plus psi ([`view_yaw_enu_of_nose`]); to face a view, the nose flies it less psi
-//! ([`nose_yaw_enu_for_view`]).
-//!
-//! The tracker models the camera's view as the world-aligned rectangle of
-//! [`Footprint`](crate::world::camera::Footprint), which is what a nadir camera sees with the
-//! nose north ([`FOOTPRINT_YAW_NED_RAD`]). Until session 48 every setpoint carried yaw ENU 0
-//! (the nose east): on a real vehicle the image's long side then lay north-south while the
-//! model held it east-west, and a missed detection removed hypotheses the camera had not
-//! looked at (the synthetic camera renders with the model's heading, so no simulation
-//! showed it). A camera turned on its mount by yaw psi (`daemon.camera_mount_rpy_rad`) is
-//! aligned by flying the nose at -psi.
+//! The tracker thinks in the camera's view ([`View`](crate::world::camera::View): which way
+//! its image's top faces); the vehicle flies its nose. A camera turned on its mount by yaw psi
+//! (`daemon.camera_mount_rpy_rad`) faces the nose's heading plus psi
+//! ([`view_yaw_enu_of_nose`], how the daemon reads every frame's view from ATTITUDE); to
+//! face a view, the nose flies it less psi ([`nose_yaw_enu_for_view`], what every setpoint
+//! carries). Until session 48 every setpoint carried yaw ENU 0 (the nose east) while the
+//! model held the view north: on a real vehicle the image lay across the model and a missed
+//! detection removed hypotheses the camera had not looked at (the synthetic camera rendered
+//! at the model's heading, so no simulation showed it).
 
 use crate::config::Config;
 use crate::frames::{yaw_enu_to_ned, yaw_ned_to_enu};
-use crate::world::camera::FOOTPRINT_YAW_NED_RAD;
+use crate::world::camera::NORTH_VIEW_YAW_ENU_RAD;
 
 /// The heading the camera's image faces, world ENU yaw (rad, [`View::yaw_enu_rad`]), on a
 /// vehicle whose nose is at `nose_yaw_ned_rad` (local NED, ATTITUDE's yaw) with its camera
@@ -31,17 +27,10 @@ pub fn nose_yaw_enu_for_view(view_yaw_enu_rad: f64, mount_yaw_body_rad: f64) -> 
     yaw_ned_to_enu(yaw_enu_to_ned(view_yaw_enu_rad) - mount_yaw_body_rad)
 }
 
-/// The yaw every setpoint of this config's flight carries, world ENU rad: the footprint's
-/// heading for its camera's mount yaw (`daemon.camera_mount_rpy_rad`).
-pub fn flown_yaw_enu_rad(cfg: &Config) -> f64 {
-    view_yaw_enu_rad(cfg.daemon.camera_mount_rpy_rad[2])
-}
-
-/// The yaw every setpoint carries, world ENU rad, for a camera turned on its mount by
-/// `mount_yaw_body_rad` (body FRD, about the body's z axis): the vehicle heading at which the
-/// camera's image axes lie along the world's as the footprint model has them.
-pub fn view_yaw_enu_rad(mount_yaw_body_rad: f64) -> f64 {
-    yaw_ned_to_enu(FOOTPRINT_YAW_NED_RAD - mount_yaw_body_rad)
+/// The nose's heading at the start setpoint, world ENU rad: the north view (the heading
+/// the tracker begins with) for this config's camera mount.
+pub fn start_yaw_enu_rad(cfg: &Config) -> f64 {
+    nose_yaw_enu_for_view(NORTH_VIEW_YAW_ENU_RAD, cfg.daemon.camera_mount_rpy_rad[2])
 }
 
 #[cfg(test)]
@@ -82,7 +71,8 @@ mod tests {
         let fov_y = 2.0 * ((720.0 / 1280.0) * (0.5 * FOV_X_RAD).tan()).atan();
         let fp = Footprint::from_fov(ALTITUDE_M, FOV_X_RAD, fov_y);
         for mount_yaw in [0.0, 0.3, std::f64::consts::FRAC_PI_2, -2.0] {
-            let (right, top) = image_edges_on_ground(mount_yaw, view_yaw_enu_rad(mount_yaw));
+            let nose = nose_yaw_enu_for_view(NORTH_VIEW_YAW_ENU_RAD, mount_yaw);
+            let (right, top) = image_edges_on_ground(mount_yaw, nose);
             // The image's right edge: east, at the footprint's half width.
             assert!(
                 (right.x - fp.half_width_m).abs() < 0.05,
@@ -104,7 +94,8 @@ mod tests {
         let (right, top) = image_edges_on_ground(0.0, 0.0);
         assert!(right.y < -20.0 && right.x.abs() < 0.05, "{right:?}");
         assert!(top.x > 10.0, "{top:?}");
-        assert!((view_yaw_enu_rad(0.0) - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        let nose = nose_yaw_enu_for_view(NORTH_VIEW_YAW_ENU_RAD, 0.0);
+        assert!((nose - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
     }
 
     #[test]

@@ -1,16 +1,13 @@
-//! The downward camera's footprint on the ground plane.
+//! The downward camera's footprint on the ground plane, and the view that places and turns
+//! it.
 
 use super::geometry::Enu2;
 
-/// The heading the footprint is drawn for, NED yaw (rad, from north toward east): the nose
-/// north. The nadir camera's image width (camera x, body right) then lies along world east
-/// (the footprint's `half_width_m`) and its height along world north. A vehicle must hold
-/// this heading (its camera turned by the mount's yaw accounted for) for the tracker's model
-/// of what the camera sees, the negative information of every missed detection, to be true.
-pub const FOOTPRINT_YAW_NED_RAD: f64 = 0.0;
-
 /// The heading of the lab's views and of every view under `guidance.view_heading = "north"`,
-/// world ENU yaw (rad): the image's top faces north ([`FOOTPRINT_YAW_NED_RAD`] in ENU).
+/// world ENU yaw (rad): the image's top faces north (NED yaw 0), its width (camera x, body
+/// right) along world east. The tracker's model of what the camera sees, the negative
+/// information of every missed detection, is true only at the heading the vehicle reports:
+/// every frame's [`View`] carries it.
 pub const NORTH_VIEW_YAW_ENU_RAD: f64 = std::f64::consts::FRAC_PI_2;
 
 /// Where a frame is seen from: the footprint's centre (the camera's ground point, under the
@@ -65,7 +62,7 @@ impl View {
 
 /// The rectangle a nadir-pointing camera sees on flat ground, centred under the agent; a
 /// [`View`] places it and turns it to the vehicle's heading (the paper's agent holds a
-/// constant heading: [`View::north`], [`FOOTPRINT_YAW_NED_RAD`]).
+/// constant heading: [`View::north`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Footprint {
     /// Half width (across the image, along world x in a north view), metres.
