@@ -765,3 +765,54 @@ fn particles_at_a_dead_end_turn_back_along_its_road() {
     }
     assert_eq!(pf.weights(), &weights_before[..]);
 }
+
+/// A frame without the target from a turned view (the nose east at field scale: the 58 m
+/// width north-south) lowers exactly the particles inside that turned rectangle, not those
+/// of the north view the paper's agent would have seen from the same place.
+#[test]
+fn negative_information_follows_the_views_heading() {
+    let mut c = outdoor();
+    c.filter.particles = 40_000;
+    let mut world = c.world();
+    world.occlusions.clear();
+    let mut rng = CoreRng::seed_from_u64(8);
+    let pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let centre = Enu2::new(300.0, 200.0);
+    let turned = View::new(centre, 0.0);
+    let north = View::north(centre);
+    let (mut after_turned, mut after_north) = (pf.clone(), pf.clone());
+    after_turned.update(None, &turned, &world, false);
+    after_north.update(None, &north, &world, false);
+    let miss = c.filter_params().miss_probability;
+    let (mut only_turned, mut only_north) = (0, 0);
+    for i in 0..pf.weights().len() {
+        let p = pf.particle(i);
+        let (in_turned, in_north) = (
+            world.is_wholly_visible(&turned, &p),
+            world.is_wholly_visible(&north, &p),
+        );
+        only_turned += usize::from(in_turned && !in_north);
+        only_north += usize::from(in_north && !in_turned);
+        let (t, n) = (after_turned.weights()[i], after_north.weights()[i]);
+        let want = match (in_turned, in_north) {
+            (true, false) => n * miss,
+            (false, true) => n / miss,
+            _ => n,
+        };
+        assert!(
+            (t - want).abs() <= 1e-12 * want.abs().max(1e-300),
+            "{p}: {t} vs {want}"
+        );
+        // A turned view reaches 29 m north and 15.5 m east, a north view the other way.
+        if in_turned && !in_north {
+            assert!(
+                (p.y - centre.y).abs() > world.footprint.half_height_m,
+                "{p}"
+            );
+        }
+    }
+    assert!(
+        only_turned > 5 && only_north > 5,
+        "{only_turned} {only_north}"
+    );
+}
