@@ -368,15 +368,16 @@ pub struct AgentConfig {
     /// it: a square of half width `reach` for `per_axis`, a disc of that radius for `norm`.
     #[serde(default)]
     pub speed_limit_shape: SpeedLimitShape,
-    /// How fast the simulator's agent turns to a new heading, rad/s (the mock autopilot
-    /// slews its yaw at the same rate). Optional; absent, 45 deg/s, PX4's MPC_YAWRAUTO_MAX
-    /// default (ArduCopter's ATC_SLEW_YAW default is 60 deg/s).
+    /// How fast the simulator's agent turns to a new heading, rad/s (the mock autopilot turns
+    /// at its firmware's own parameter: PX4 MPC_YAWRAUTO_MAX, ArduCopter ATC_SLEW_YAW).
+    /// Optional; absent, 45 deg/s, PX4's MPC_YAWRAUTO_MAX default (ArduCopter's ATC_SLEW_YAW
+    /// default is 60 deg/s).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub yaw_rate_limit_rad_s: Option<f64>,
 }
 
-/// The simulator's and the mock's turn rate when `agent.yaw_rate_limit_rad_s` is absent,
-/// rad/s: PX4's MPC_YAWRAUTO_MAX default, 45 deg/s.
+/// The simulator's turn rate when `agent.yaw_rate_limit_rad_s` is absent, rad/s: PX4's
+/// MPC_YAWRAUTO_MAX default, 45 deg/s.
 pub const DEFAULT_YAW_RATE_LIMIT_RAD_S: f64 = std::f64::consts::FRAC_PI_4;
 
 impl AgentConfig {

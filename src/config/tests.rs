@@ -420,3 +420,25 @@ fn the_view_heading_defaults_by_the_cue_and_a_wrong_one_is_refused() {
         "{err}"
     );
 }
+
+/// `agent.yaw_rate_limit_rad_s` must be a positive number (a negative rate would turn the
+/// agent backwards); absent, PX4's 45 deg/s.
+#[test]
+fn a_yaw_rate_limit_that_is_not_positive_is_refused() {
+    assert_eq!(
+        Config::default_lab().agent.yaw_rate_limit_rad_s(),
+        DEFAULT_YAW_RATE_LIMIT_RAD_S
+    );
+    for bad in [-1.0, 0.0] {
+        let err = load_modified(|t| {
+            tbl(t, "agent").insert("yaw_rate_limit_rad_s".into(), bad.into());
+        })
+        .unwrap_err();
+        expect_invalid(err, "agent.yaw_rate_limit_rad_s");
+    }
+    let ok = load_modified(|t| {
+        tbl(t, "agent").insert("yaw_rate_limit_rad_s".into(), 1.0.into());
+    })
+    .unwrap();
+    assert_eq!(ok.agent.yaw_rate_limit_rad_s(), 1.0);
+}

@@ -142,6 +142,9 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     positive("agent.speed_limit_mps", a.speed_limit_mps)?;
     positive("agent.accel_limit_mps2", a.accel_limit_mps2)?;
     non_negative("agent.dead_zone_m", a.dead_zone_m)?;
+    if let Some(rate) = a.yaw_rate_limit_rad_s {
+        positive("agent.yaw_rate_limit_rad_s", rate)?;
+    }
     let start = Enu2::new(a.start_enu_m[0], a.start_enu_m[1]);
     if !ws.contains(&start) {
         return Err(invalid(
