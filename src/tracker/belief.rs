@@ -34,15 +34,31 @@ impl Tracker {
     }
 
     /// The way the target was driving when last seen, when its measurements showed it
-    /// moving (faster than a tenth of the largest speed a hypothesis gets); `None` for a
-    /// target seen (nearly) standing, whose measured velocity is the measurement noise's. A
-    /// car that had stopped at a junction to turn was last measured at 0.6 m/s "west", and
-    /// every re-spread route started on the road west while it drove south (field-ring seed
-    /// 2, BENCHMARKS.md "Field scale, part 38"); without a heading each route starts on the
-    /// road nearest its own draw of where the target was.
+    /// moving (faster than a tenth of the largest speed a hypothesis gets, and at least half
+    /// the fastest it was measured cruising at over the last [`CRUISE_WINDOW_S`]); `None`
+    /// for a target seen (nearly) standing, whose measured velocity is the measurement
+    /// noise's. A car that had stopped at a junction to turn was last measured at 0.6 m/s
+    /// "west", and every re-spread route started on the road west while it drove south
+    /// (field-ring seed 2, BENCHMARKS.md "Field scale, part 38"); without a heading each
+    /// route starts on the road nearest its own draw of where the target was, either way
+    /// along a two-way street. A car last measured pulling out of a turn back (1.6 m/s after
+    /// cruising at 12) had for a heading the chord of its turn, 50 degrees off the road it
+    /// took: every route went up the crossing road, the filter's belief on the right road
+    /// was thrown away, and the car was never found again (random-6, BENCHMARKS.md "Field
+    /// scale, part 48").
     pub(super) fn last_seen_heading(&self) -> Option<Enu2> {
-        let moving = self.last_seen_speed_mps > 0.1 * self.params.filter.init_speed_max_mps;
+        let s = self.last_seen_speed_mps;
+        let moving =
+            s > 0.1 * self.params.filter.init_speed_max_mps && s >= 0.5 * self.cruise_mps();
         moving.then_some(self.last_seen_velocity_enu)
+    }
+
+    /// The fastest the target was measured driving over the last [`CRUISE_WINDOW_S`], m/s.
+    fn cruise_mps(&self) -> f64 {
+        self.recent_speeds
+            .iter()
+            .map(|(_, v)| *v)
+            .fold(self.last_seen_speed_mps, f64::max)
     }
 
     /// The speeds new hypotheses get: from 0.7 x the speed the target had when last seen
@@ -54,7 +70,7 @@ impl Tracker {
     pub(super) fn hypothesis_speeds(&self) -> std::ops::RangeInclusive<f64> {
         let v_max = self.params.filter.init_speed_max_mps;
         let s = self.last_seen_speed_mps;
-        let cruise = self.recent_speeds.iter().map(|(_, v)| *v).fold(s, f64::max);
+        let cruise = self.cruise_mps();
         if self.last_measurement.is_some() && cruise > 0.1 * v_max {
             (0.7 * s).min(v_max)..=(1.3 * cruise).min(v_max)
         } else if self.last_measurement.is_none() {

@@ -545,6 +545,50 @@ fn a_car_seen_standing_is_re_spread_from_the_road_it_stands_on_not_its_noise_hea
     assert!(east > 0.9 && north < 0.05, "north {north}, east {east}");
 }
 
+/// The car seen cruising north at 10 m/s up outdoor's two-way street x = 600 to (600, 390),
+/// 10 m short of its junction at (600, 400), then for its last 3 s moving `last_3s_m` (from
+/// there); then unseen (the camera off every road) until after the re-spread: the belief's
+/// weight on the street south of (600, 385).
+fn re_spread_after_the_turn_back_street(last_3s_m: Enu2) -> f64 {
+    let c = outdoor_config();
+    let dt = 1.0 / c.timing.filter_hz;
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    let mut t_s = 0.0;
+    while t_s < 12.0 - 1e-9 {
+        t_s += dt;
+        let car = Enu2::new(600.0, 390.0 - 10.0 * (12.0 - t_s));
+        frame(&mut t, t_s, car, Some(car));
+    }
+    let slowed_s = t_s;
+    while t_s < slowed_s + 3.0 - 1e-9 {
+        t_s += dt;
+        let car = Enu2::new(600.0, 390.0) + last_3s_m * ((t_s - slowed_s) / 3.0);
+        frame(&mut t, t_s, car, Some(car));
+    }
+    unseen_until_after_the_re_spread(&mut t, &c, t_s, Enu2::new(1300.0, -150.0));
+    let pf = t.estimator().particle_filter().unwrap();
+    pf.particles()
+        .iter()
+        .zip(pf.weights())
+        .filter(|(p, _)| (p.x - 600.0).abs() < 5.0 && p.y < 385.0)
+        .map(|(_, w)| w)
+        .sum()
+}
+
+#[test]
+fn a_car_last_seen_slowed_far_below_its_cruise_is_re_spread_either_way_not_along_its_chord() {
+    // Pulling out of a turn back: 5 m north-west in 3 s (1.7 m/s after 10) is the chord of
+    // the turn, not the way it drives. Without a heading, half the routes take the street
+    // south at once, half go on to the junction, where 0.3 turn back south: 0.65 south.
+    // Before session 50 the chord was the heading: north, 0.3 south.
+    let south = re_spread_after_the_turn_back_street(Enu2::new(-3.0, 4.0));
+    assert!(south > 0.5, "south {south}");
+    // Both ways: measured still driving north at 9 m/s, the heading counts: only the turn
+    // back at the junction (0.3) brings a route south.
+    let south = re_spread_after_the_turn_back_street(Enu2::new(0.0, 27.0));
+    assert!(south < 0.4, "south {south}");
+}
+
 #[test]
 fn a_car_last_seen_slowing_is_re_spread_up_to_its_cruising_speed() {
     let c = field_grid();

@@ -383,3 +383,68 @@ fn a_track_past_a_junction_stays_beside_its_new_road_not_back_at_the_junction() 
         .pieces()
         .all(|((a, _), _)| (a - Enu2::new(600.0, 1100.0)).norm() < 1e-6));
 }
+
+/// A crossing at (100, 0) of a two-way street (west 0 <-> crossing 1) with one-way roads
+/// on east (to 2) and north (to 3): 0.2 back west, 0.3 east, 0.5 north.
+fn crossing_with_a_two_way_street() -> RoadNetwork {
+    network(
+        &[
+            (0, 0.0, 0.0),
+            (1, 100.0, 0.0),
+            (2, 200.0, 0.0),
+            (3, 100.0, 100.0),
+        ],
+        &[(0, 1, 1.0), (1, 0, 0.2), (1, 2, 0.3), (1, 3, 0.5)],
+    )
+}
+
+#[test]
+fn a_route_without_a_heading_drives_a_two_way_street_either_way_and_a_one_way_its_way() {
+    let road = crossing_with_a_two_way_street();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let n = 4000;
+    // 30 m short of the crossing on the two-way street, 60 m on: straight back west to
+    // (10, 0), or through the crossing and 30 m along one of its three ways on.
+    let from = Enu2::new(70.0, 2.0);
+    let (mut west, mut back, mut east, mut north) = (0, 0, 0, 0);
+    for _ in 0..n {
+        let route = road.drive(&from, None, &[0.0, 60.0], &mut rng).unwrap();
+        assert!(
+            (route[0].0 - Enu2::new(70.0, 0.0)).norm() < 1e-9,
+            "{}",
+            route[0].0
+        );
+        let p = route[1].0;
+        if (p - Enu2::new(10.0, 0.0)).norm() < 1e-9 {
+            west += 1;
+        } else if (p - Enu2::new(70.0, 0.0)).norm() < 1e-9 {
+            back += 1;
+        } else if (p - Enu2::new(130.0, 0.0)).norm() < 1e-9 {
+            east += 1;
+        } else if (p - Enu2::new(100.0, 30.0)).norm() < 1e-9 {
+            north += 1;
+        } else {
+            panic!("60 m on off every way: {p}");
+        }
+    }
+    let share = |k: i32| k as f64 / n as f64;
+    assert!((share(west) - 0.5).abs() < 0.03, "west {}", share(west));
+    for (name, k, p) in [
+        ("back", back, 0.1),
+        ("east", east, 0.15),
+        ("north", north, 0.25),
+    ] {
+        assert!((share(k) - p).abs() < 0.03, "{name} {}", share(k));
+    }
+    // On the one-way road east, every route drives east, 60 m on.
+    for _ in 0..200 {
+        let route = road
+            .drive(&Enu2::new(120.0, 1.0), None, &[60.0], &mut rng)
+            .unwrap();
+        assert!(
+            (route[0].0 - Enu2::new(180.0, 0.0)).norm() < 1e-9,
+            "{}",
+            route[0].0
+        );
+    }
+}
