@@ -250,7 +250,9 @@ impl RoadNetwork {
     /// One route a target at `from` (heading `heading`, placed as in
     /// [`Self::reachable_from`]) can drive, its turns drawn by their probabilities: where
     /// it is, and the unit direction of its road, after each path length in `distances_m`
-    /// (ascending, m). A target at a node without a way on stops there. `None` without roads.
+    /// (ascending, m). Without a heading, a target on a two-way street drives it either way
+    /// with even chances. A target at a node without a way on stops there. `None` without
+    /// roads.
     pub fn drive<R: Rng + ?Sized>(
         &self,
         from: &Enu2,
