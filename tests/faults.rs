@@ -107,11 +107,14 @@ struct Relay {
     texts: Arc<Mutex<Vec<String>>>,
 }
 
-/// A relay on `front` to the mock at `vehicle`, sending `inject` to infotrack every 100 ms
-/// once the real vehicle's heartbeat has been passed on (so that the first autopilot
-/// infotrack hears is the real one).
-async fn relay(front: u16, vehicle: u16, inject: Vec<Vec<u8>>) -> Relay {
-    let front = Arc::new(UdpSocket::bind(("127.0.0.1", front)).await.unwrap());
+/// A relay to the mock at `vehicle`, and the loopback port infotrack connects to, sending
+/// `inject` to infotrack every 100 ms once the real vehicle's heartbeat has been passed on
+/// (so that the first autopilot infotrack hears is the real one). The relay binds its front
+/// port itself: a port asked for free and bound later was once taken in between by a test
+/// running beside it (AddrInUse in CI).
+async fn relay(vehicle: u16, inject: Vec<Vec<u8>>) -> (Relay, u16) {
+    let front = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
+    let front_port = front.local_addr().unwrap().port();
     let back = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
     back.connect(("127.0.0.1", vehicle)).await.unwrap();
     let companion: Arc<Mutex<Option<SocketAddr>>> = Arc::default();
@@ -171,7 +174,7 @@ async fn relay(front: u16, vehicle: u16, inject: Vec<Vec<u8>>) -> Relay {
             }
         });
     }
-    r
+    (r, front_port)
 }
 
 /// Rows "a second MAVLink system is adopted" and "NaN in LOCAL_POSITION_NED enters the
@@ -180,8 +183,7 @@ async fn relay(front: u16, vehicle: u16, inject: Vec<Vec<u8>>) -> Relay {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_second_vehicle_and_nan_poses_on_the_wire_are_refused() {
     let (_mock, vehicle) = udp_mock(MockConfig::new(Flavor::Px4)).await;
-    let front = free_udp_port();
-    let relay = relay(front, vehicle, hostile_frames()).await;
+    let (relay, front) = relay(vehicle, hostile_frames()).await;
     let dir = tempfile::tempdir().unwrap();
     let out = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
         .args(["run", "--quiet", "--duration", "12", "--motion", "cv"])
@@ -271,8 +273,7 @@ async fn a_second_vehicle_and_nan_poses_on_the_wire_are_refused() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_disk_is_said_to_the_log_and_the_gcs_and_the_flight_goes_on() {
     let (_mock, vehicle) = udp_mock(MockConfig::new(Flavor::Px4)).await;
-    let front = free_udp_port();
-    let relay = relay(front, vehicle, Vec::new()).await;
+    let (relay, front) = relay(vehicle, Vec::new()).await;
     let dir = tempfile::tempdir().unwrap();
     let mut cmd = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"));
     cmd.args(["run", "--quiet", "--duration", "25", "--motion", "cv"])
