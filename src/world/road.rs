@@ -261,25 +261,12 @@ impl RoadNetwork {
         rng: &mut R,
     ) -> Option<Vec<(Enu2, Enu2)>> {
         let (mut u, mut v, mut s0) = self.nearest_edge(from, heading)?;
-        // Without a heading, a two-way street is driven either way with even chances (the
-        // nearest edge alone would send every route the way its edge happens to be listed).
+        // The nearest edge alone would send every route the way its edge is listed.
         if heading.is_none() && self.nodes[v].next.iter().any(|(w, _)| *w == u) && rng.gen_bool(0.5)
         {
             let len = (self.nodes[v].position_enu - self.nodes[u].position_enu).norm();
             (u, v, s0) = (v, u, len - s0);
         }
-        Some(self.drive_along(u, v, s0, distances_m, rng))
-    }
-
-    /// [`Self::drive`] from `s0` metres along edge `u`->`v`.
-    fn drive_along<R: Rng + ?Sized>(
-        &self,
-        mut u: usize,
-        mut v: usize,
-        s0: f64,
-        distances_m: &[f64],
-        rng: &mut R,
-    ) -> Vec<(Enu2, Enu2)> {
         // Path length at the start of edge u->v (negative: `from` lies along it).
         let mut edge_start = -s0;
         let mut out = Vec::with_capacity(distances_m.len());
@@ -306,7 +293,7 @@ impl RoadNetwork {
                 (u, v) = (v, w);
             }
         }
-        out
+        Some(out)
     }
 
     /// The edge (from-node, to-node indices) nearest to `p` and the distance along it of
