@@ -174,6 +174,49 @@ async fn a_takeoff_the_pilot_interrupts_stops_at_once_and_says_why() {
     }
 }
 
+/// A clean stop on PX4 holds at the altitude infotrack was flying, not at the height of the
+/// moment of the switch (AUTO.LOITER's own): here the stop comes mid-climb from 4 m to 9 m,
+/// and the hold goes on to 9 m over its stopping point (MAV_CMD_DO_CHANGE_ALTITUDE, as PX4
+/// SIH takes it). ArduPilot's BRAKE stops where it is, as before.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_px4_stop_mid_climb_holds_at_the_altitude_flown() {
+    for flavor in [Flavor::Px4, Flavor::ArduPilot] {
+        let (mock, link) = setup(flavor, 0.0, 1).await;
+        link.request_telemetry().await.unwrap();
+        link.take_off(4.0, Duration::from_secs(20)).await.unwrap();
+        fly_to(&link, 3.0, 2.0, 4.0).await;
+        let p = PositionEnu {
+            x_east_m: 3.0,
+            y_north_m: 2.0,
+            z_up_m: 9.0,
+        };
+        link.set_setpoint(p, 0.0).unwrap();
+        link.wait_for(
+            |s| s.local_ned.is_some_and(|(_, n, _)| -n.z_down_m > 5.0),
+            "the climb under way",
+            Duration::from_secs(10),
+        )
+        .await
+        .unwrap();
+        link.hold().await.unwrap();
+        let at_switch_m = link.position_enu().unwrap().z_up_m;
+        tokio::time::sleep(Duration::from_secs(6)).await;
+        let held_m = -mock.with(|m| m.position_ned_m()[2]);
+        assert_eq!(mock.with(|m| m.mode()), Mode::hold_for(flavor));
+        if flavor == Flavor::Px4 {
+            assert!(
+                (held_m - 9.0).abs() < 0.3,
+                "held at {held_m:.2} m, switched at {at_switch_m:.2} m"
+            );
+        } else {
+            assert!(
+                held_m < 8.0,
+                "{flavor:?}: BRAKE climbed on to {held_m:.2} m"
+            );
+        }
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn thirty_percent_packet_loss_still_completes_the_sequence() {
     for flavor in [Flavor::Px4, Flavor::ArduPilot] {

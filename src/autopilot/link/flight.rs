@@ -243,12 +243,20 @@ impl VehicleLink {
         }
     }
 
-    /// Clean stop: hold position and altitude (PX4 AUTO.LOITER; ArduPilot BRAKE, else
-    /// GUIDED at the current position: its LOITER descends without RC throttle) and stop
-    /// streaming.
+    /// Clean stop: hold position and altitude (PX4 AUTO.LOITER, brought back to the altitude
+    /// flown; ArduPilot BRAKE, else GUIDED at the current position: its LOITER descends
+    /// without RC throttle) and stop streaming.
     pub async fn hold(&self) -> Result<(), LinkError> {
         let flavor = self.flavor();
+        let flown_up_m = self.streamed_altitude_up_m();
         let r = self.set_mode(Mode::hold_for(flavor)).await;
+        if r.is_ok() && flavor == Flavor::Px4 {
+            if let Some(up_m) = flown_up_m {
+                if let Err(e) = self.px4_hold_at_altitude(up_m).await {
+                    tracing::warn!("the hold keeps the altitude it had at the switch: {e}");
+                }
+            }
+        }
         if r.is_err() && flavor == Flavor::ArduPilot {
             // BRAKE refused: GUIDED at the current position also holds altitude without RC.
             if let Some(p) = self.position_enu() {
@@ -258,5 +266,39 @@ impl VehicleLink {
         }
         *self.streamer.target_ned.lock().expect("streamer poisoned") = None;
         r
+    }
+    /// The height (world up, m) of the setpoint being streamed, if one is.
+    fn streamed_altitude_up_m(&self) -> Option<f64> {
+        let target = *self.streamer.target_ned.lock().expect("streamer poisoned");
+        target.map(|t| -t.position_ned.z_down_m)
+    }
+
+    /// Brings PX4's AUTO.LOITER to `up_m` (the vehicle's local frame, up) with
+    /// MAV_CMD_DO_CHANGE_ALTITUDE (param1 AMSL, frame MAV_FRAME_GLOBAL), which PX4's
+    /// navigator applies in AUTO.LOITER, keeping the loiter's own stopping point. Why:
+    /// AUTO.LOITER holds the altitude of the moment of the switch, and PX4 SIH's altitude
+    /// wanders by up to ~0.5 m under offboard control at the lab's 1.2 m; a CI flight switched
+    /// at 0.63 m and its hold read 0.28 m ten seconds later (BENCHMARKS, part 49). The
+    /// height is taken AMSL through the estimator's own offset: GLOBAL_POSITION_INT's
+    /// altitude now plus the difference between `up_m` and LOCAL_POSITION_NED's height.
+    async fn px4_hold_at_altitude(&self, up_m: f64) -> Result<(), LinkError> {
+        let s = self.state();
+        let (Some((_, _, _, relative_m)), Some(home_amsl_m), Some((_, local, _))) =
+            (s.global, s.home_alt_amsl_m, s.local_ned)
+        else {
+            return Err(LinkError::NoTelemetry(
+                "GLOBAL_POSITION_INT and LOCAL_POSITION_NED",
+            ));
+        };
+        let amsl_m = home_amsl_m + relative_m + (up_m + local.z_down_m);
+        if !amsl_m.is_finite() {
+            return Err(LinkError::NonFiniteSetpoint);
+        }
+        const MAV_FRAME_GLOBAL: f32 = 0.0;
+        self.command(
+            MavCmd::MAV_CMD_DO_CHANGE_ALTITUDE,
+            [amsl_m as f32, MAV_FRAME_GLOBAL, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .await
     }
 }

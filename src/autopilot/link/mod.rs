@@ -126,6 +126,9 @@ pub enum LinkError {
     /// A setpoint with a NaN or infinite coordinate or heading was asked for (never sent).
     #[error("setpoint with a non-finite position, velocity or yaw refused")]
     NonFiniteSetpoint,
+    /// A command needs telemetry the vehicle has not sent yet.
+    #[error("no {0} from the vehicle yet")]
+    NoTelemetry(&'static str),
     /// Sending failed.
     #[error("MAVLink send failed: {0}")]
     Send(String),

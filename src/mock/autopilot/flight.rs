@@ -161,6 +161,35 @@ impl MockAutopilot {
         [x + vx * k, y + vy * k, z]
     }
 
+    /// PX4's MAV_CMD_DO_CHANGE_ALTITUDE: its commander switches to AUTO.LOITER (accepted);
+    /// its navigator moves the hold to `amsl_m` (param1, read as AMSL whatever param2's frame
+    /// says; NaN keeps the altitude) only when the vehicle was armed and in AUTO.LOITER
+    /// already, keeping the hold's point, and refuses a height beyond GF_MAX_VER_DIST with
+    /// "Altitude change is outside geofence".
+    pub(super) fn change_altitude_px4(&mut self, amsl_m: f64, out: &mut Vec<MavMessage>) {
+        let applies = self.armed && self.mode == Mode::Hold;
+        if self.mode != Mode::Hold {
+            self.set_mode_internal(Mode::Hold);
+        }
+        if !applies || !amsl_m.is_finite() {
+            return;
+        }
+        let z_down_m = self.cfg.origin_alt_m - amsl_m;
+        let above_home_m = self.home_ned_m[2] - z_down_m;
+        let max_v = self.params.get("GF_MAX_VER_DIST", 0.0);
+        if max_v > 0.0 && above_home_m > max_v {
+            let m = self.statustext(
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                "Altitude change is outside geofence",
+            );
+            out.push(m);
+            return;
+        }
+        if let Some(t) = &mut self.target_ned_m {
+            t[2] = z_down_m;
+        }
+    }
+
     pub(super) fn failsafe(&mut self, reason: &str, mode: Mode, out: &mut Vec<MavMessage>) {
         self.set_mode_internal(mode);
         self.events.push(MockEvent::Failsafe {

@@ -147,6 +147,11 @@ impl MockAutopilot {
                 MAV_RESULT_ACCEPTED
             }
             MavCmd::MAV_CMD_NAV_LAND => MAV_RESULT_FAILED,
+            MavCmd::MAV_CMD_DO_CHANGE_ALTITUDE if self.cfg.flavor == Flavor::Px4 => {
+                self.offboard_lost = false;
+                self.change_altitude_px4(c.param1 as f64, &mut out);
+                MAV_RESULT_ACCEPTED
+            }
             MavCmd::MAV_CMD_NAV_TAKEOFF => {
                 // PX4 reads a NaN altitude (what MAVSDK's action.takeoff sends) as "the
                 // configured take-off altitude", MIS_TAKEOFF_ALT above home.

@@ -638,3 +638,59 @@ fn a_setpoint_yaw_is_turned_to_at_the_auto_yaw_rate() {
         a.yaw_ned_rad
     );
 }
+
+/// PX4's MAV_CMD_DO_CHANGE_ALTITUDE (param1 AMSL): in AUTO.LOITER the hold moves to that
+/// height over its own point; from another mode it only switches to AUTO.LOITER (PX4's
+/// navigator applies the height only in a hold it is already in); beyond GF_MAX_VER_DIST
+/// it is refused with PX4's message; ArduPilot's mock does not take it.
+#[test]
+fn px4_change_altitude_moves_a_hold_and_only_a_hold() {
+    let mut cfg = MockConfig::new(Flavor::Px4);
+    cfg.param_overrides = vec![("GF_MAX_VER_DIST".into(), 20.0)];
+    let origin = cfg.origin_alt_m as f32;
+    let mut m = MockAutopilot::new(cfg, 0.0);
+    let t = stream(&mut m, 0.0, 1.5, Some([2.0, 1.0, -5.0]));
+    set_mode(&mut m, t, Mode::Offboard);
+    arm(&mut m, t);
+    let t = stream(&mut m, t, t + 12.0, Some([2.0, 1.0, -5.0]));
+    let change = |amsl: f32| {
+        cmd(
+            MavCmd::MAV_CMD_DO_CHANGE_ALTITUDE,
+            [amsl, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+    };
+    // From OFFBOARD: a hold where it is, the height ignored.
+    let out = m.handle(t, &GCS, &change(origin + 9.0));
+    assert_eq!(ack_of(&out), MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(m.mode(), Mode::Hold);
+    let t = stream(&mut m, t, t + 8.0, None);
+    assert!(
+        (m.position_ned_m()[2] + 5.0).abs() < 0.2,
+        "{:?}",
+        m.position_ned_m()
+    );
+    // In the hold: up to 9 m over the same point.
+    let out = m.handle(t, &GCS, &change(origin + 9.0));
+    assert_eq!(ack_of(&out), MavResult::MAV_RESULT_ACCEPTED);
+    let t = stream(&mut m, t, t + 10.0, None);
+    let p = m.position_ned_m();
+    assert!(
+        (p[2] + 9.0).abs() < 0.2 && (p[0] - 2.0).abs() < 0.3 && (p[1] - 1.0).abs() < 0.3,
+        "{p:?}"
+    );
+    // Beyond the 20 m vertical fence: refused, the hold stays.
+    let out = m.handle(t, &GCS, &change(origin + 25.0));
+    let said: String = out
+        .iter()
+        .filter_map(|x| match x {
+            MavMessage::STATUSTEXT(s) => Some(s.text.to_str().unwrap_or("").to_string()),
+            _ => None,
+        })
+        .collect();
+    assert!(said.contains("outside geofence"), "{said}");
+    stream(&mut m, t, t + 5.0, None);
+    assert!((m.position_ned_m()[2] + 9.0).abs() < 0.2);
+    let mut ap = MockAutopilot::new(MockConfig::new(Flavor::ArduPilot), 0.0);
+    let out = ap.handle(1.0, &GCS, &change(origin + 9.0));
+    assert_eq!(ack_of(&out), MavResult::MAV_RESULT_UNSUPPORTED);
+}
