@@ -267,6 +267,7 @@ impl VehicleLink {
         *self.streamer.target_ned.lock().expect("streamer poisoned") = None;
         r
     }
+
     /// The height (world up, m) of the setpoint being streamed, if one is.
     fn streamed_altitude_up_m(&self) -> Option<f64> {
         let target = *self.streamer.target_ned.lock().expect("streamer poisoned");
@@ -278,7 +279,7 @@ impl VehicleLink {
     /// navigator applies in AUTO.LOITER, keeping the loiter's own stopping point. Why:
     /// AUTO.LOITER holds the altitude of the moment of the switch, and PX4 SIH's altitude
     /// wanders by up to ~0.5 m under offboard control at the lab's 1.2 m; a CI flight switched
-    /// at 0.63 m and its hold read 0.28 m ten seconds later (BENCHMARKS, part 49). The
+    /// at 0.63 m and its hold read 0.28 m ten seconds later (BENCHMARKS.md "The PX4 hold after the flight"). The
     /// height is taken AMSL through the estimator's own offset: GLOBAL_POSITION_INT's
     /// altitude now plus the difference between `up_m` and LOCAL_POSITION_NED's height.
     async fn px4_hold_at_altitude(&self, up_m: f64) -> Result<(), LinkError> {
