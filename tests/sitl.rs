@@ -908,9 +908,15 @@ fn against_recording(now: &probe::Response, name: &str) -> Result<(), String> {
     // ramp lag 0.569-0.687 m (recorded 0.40-0.48), hover RMS 0.206-0.352 m (recorded
     // 0.33-0.45). Floors for those three figures; the others keep their margins. Hold
     // drift too (sessions 18-19, three fresh-clone CI flights: 0.164-0.210 m, recorded
-    // 0.38-0.53 m): it holds its position better than recorded on some boots.
+    // 0.38-0.53 m): it holds its position better than recorded on some boots. Step rise too
+    // (sessions 18-19 and 51: 4.15 s and 4.14 s on both flights of one fresh-clone CI run,
+    // 4.64 s standalone, 2.11-3.29 s on reruns of the same commits, recorded 2.09-2.89 s):
+    // SIH on the wall clock rises slower when the machine is busy, flight after flight, so
+    // the second flight does not rescue it; a 2 s floor keeps 0.1-4.9 s, still failing a
+    // firmware that does not answer the step or crawls to it.
     let floors: &[(&str, f64)] = if name == "px4-sih" {
         &[
+            ("step_rise_s", 2.0),
             ("step_overshoot_m", 0.15),
             ("ramp_lag_m", 0.3),
             ("hover_rms_m", 0.2),
