@@ -763,3 +763,45 @@ fn a_belief_predicted_by_a_model_that_knows_the_roads_is_re_routed_at_a_fork() {
     let mean = shares.iter().sum::<f64>() / shares.len() as f64;
     assert!(mean > 0.045, "north shares {shares:?}");
 }
+
+/// A far waypoint is flown to along the roads: outdoor's drone over the east road (0,0) ->
+/// (600,0) at x = 300, the waypoint up the street x = 600 at (600, 300). The setpoint is one
+/// reach ahead along the road, moving east at top speed; off the roads by more than the
+/// view's shorter side, or where the roads wind far beyond the straight line, it is `None`
+/// (the caller flies straight).
+#[test]
+fn a_far_waypoint_is_flown_to_along_the_roads_unless_they_are_far_or_wind_away() {
+    let c = outdoor_config();
+    let t = tracker(&c, GuidanceKind::Eer, false);
+    let reach = t.params.eer.reach_m;
+    let horizon_s = t.params.eer.horizon_steps as f64 * t.params.filter.dt_s;
+    let (setpoint, velocity) = t
+        .along_the_roads(&Enu2::new(300.0, 10.0), &Enu2::new(600.0, 300.0), horizon_s)
+        .expect("on the roads, a 1.4x road path");
+    assert!(
+        (setpoint - Enu2::new(300.0 + reach, 0.0)).norm() < 1e-9,
+        "{setpoint}"
+    );
+    assert!(
+        (velocity - Enu2::new(reach / horizon_s, 0.0)).norm() < 1e-9,
+        "{velocity}"
+    );
+    // The same way straight would head north-east, off the road.
+    let straight = super::approach_velocity(
+        &Enu2::new(300.0, 10.0),
+        &Enu2::new(600.0, 300.0),
+        horizon_s,
+        reach,
+        t.params.eer.reach_shape,
+    );
+    assert!(straight.y > 0.5 * straight.norm(), "{straight}");
+    // 40 m off every road (the view's shorter side is ~31 m at 45 m): straight.
+    assert!(t
+        .along_the_roads(&Enu2::new(300.0, 40.0), &Enu2::new(600.0, 300.0), horizon_s)
+        .is_none());
+    // From (300, 0) to (300, 790): either way round the roads is 1400 m, 1.77 x the
+    // straight line: straight.
+    assert!(t
+        .along_the_roads(&Enu2::new(300.0, 0.0), &Enu2::new(300.0, 790.0), horizon_s)
+        .is_none());
+}

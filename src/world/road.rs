@@ -5,6 +5,9 @@ use rand::Rng;
 use super::geometry::Enu2;
 use serde::{Deserialize, Serialize};
 
+mod route;
+pub use route::RoadPath;
+
 /// A node of the road network.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -70,6 +73,8 @@ pub struct RoadNetwork {
     segments: Vec<(Enu2, Enu2)>,
     /// [`NEAR_EDGE_SHARE`] of the shortest edge, m (infinite without edges).
     near_tolerance_m: f64,
+    /// The roads as an undirected graph weighed by length ([`Self::path_between`]).
+    graph: petgraph::graph::UnGraph<Enu2, f64>,
 }
 
 impl RoadNetwork {
@@ -95,8 +100,10 @@ impl RoadNetwork {
             start: index(c.start_node),
             segments: Vec::new(),
             near_tolerance_m: f64::INFINITY,
+            graph: Default::default(),
         };
         road.segments = road.edges_enu();
+        road.graph = route::undirected_graph(&road);
         let shortest = road
             .segments
             .iter()

@@ -448,3 +448,42 @@ fn a_route_without_a_heading_drives_a_two_way_street_either_way_and_a_one_way_it
         );
     }
 }
+
+#[test]
+fn the_road_path_turns_at_the_junction_and_runs_either_way() {
+    let road = outdoor_road();
+    // East along 0 -> 1, then north up x = 600.
+    let path = road
+        .path_between(&Enu2::new(300.0, 5.0), &Enu2::new(603.0, 300.0))
+        .unwrap();
+    let want = [
+        Enu2::new(300.0, 0.0),
+        Enu2::new(600.0, 0.0),
+        Enu2::new(600.0, 300.0),
+    ];
+    assert_eq!(path.points_enu().len(), 3, "{path:?}");
+    for (p, w) in path.points_enu().iter().zip(want) {
+        assert!((p - w).norm() < 1e-9, "{path:?}");
+    }
+    assert!((path.length_m() - 600.0).abs() < 1e-9);
+    let (p, dir) = path.point_at(350.0);
+    assert!(
+        (p - Enu2::new(600.0, 50.0)).norm() < 1e-9 && (dir - Enu2::new(0.0, 1.0)).norm() < 1e-9
+    );
+    let (end, _) = path.point_at(1e6);
+    assert!((end - want[2]).norm() < 1e-9, "clamped to the end: {end}");
+    // 4 -> 5 is one-way west; the drone may fly it east: (300, 800) to (600, 700) is 300 m
+    // east to node 4, then 100 m south, both against the car's directions.
+    let back = road
+        .path_between(&Enu2::new(300.0, 800.0), &Enu2::new(600.0, 700.0))
+        .unwrap();
+    assert!((back.length_m() - 400.0).abs() < 1e-9, "{back:?}");
+    // Both ends on one road: straight along it, whichever way.
+    for (a, b) in [(100.0, 400.0), (400.0, 100.0)] {
+        let same = road
+            .path_between(&Enu2::new(a, 3.0), &Enu2::new(b, -2.0))
+            .unwrap();
+        assert_eq!(same.points_enu().len(), 2, "{same:?}");
+        assert!((same.length_m() - 300.0).abs() < 1e-9, "{same:?}");
+    }
+}
