@@ -765,43 +765,51 @@ fn a_belief_predicted_by_a_model_that_knows_the_roads_is_re_routed_at_a_fork() {
 }
 
 /// A far waypoint is flown to along the roads: outdoor's drone over the east road (0,0) ->
-/// (600,0) at x = 300, the waypoint up the street x = 600 at (600, 300). The setpoint is one
-/// reach ahead along the road, moving east at top speed; off the roads by more than the
-/// view's shorter side, or where the roads wind far beyond the straight line, it is `None`
-/// (the caller flies straight).
+/// (600,0) at x = 100, the waypoint up the street x = 600 at (600, 120), 620 m by road and
+/// 512 m straight (1.21 x). The setpoint is one reach ahead along the road, moving east at
+/// top speed; off the roads by more than the view's shorter side, or where the roads wind
+/// beyond 1.25 x the straight line, it is `None` (the caller flies straight).
 #[test]
 fn a_far_waypoint_is_flown_to_along_the_roads_unless_they_are_far_or_wind_away() {
     let c = outdoor_config();
     let t = tracker(&c, GuidanceKind::Eer, false);
     let reach = t.params.eer.reach_m;
     let horizon_s = t.params.eer.horizon_steps as f64 * t.params.filter.dt_s;
+    let waypoint = Enu2::new(600.0, 120.0);
     let (setpoint, velocity) = t
-        .along_the_roads(&Enu2::new(300.0, 10.0), &Enu2::new(600.0, 300.0), horizon_s)
-        .expect("on the roads, a 1.4x road path");
+        .along_the_roads(&Enu2::new(100.0, 10.0), &waypoint, horizon_s)
+        .expect("near the roads, a 1.21 x road path");
     assert!(
-        (setpoint - Enu2::new(300.0 + reach, 0.0)).norm() < 1e-9,
+        (setpoint - Enu2::new(100.0 + reach, 0.0)).norm() < 1e-9,
         "{setpoint}"
     );
     assert!(
         (velocity - Enu2::new(reach / horizon_s, 0.0)).norm() < 1e-9,
         "{velocity}"
     );
-    // The same way straight would head north-east, off the road.
+    // Straight, the drone would head north of east, off the road.
     let straight = super::approach_velocity(
-        &Enu2::new(300.0, 10.0),
-        &Enu2::new(600.0, 300.0),
+        &Enu2::new(100.0, 10.0),
+        &waypoint,
         horizon_s,
         reach,
         t.params.eer.reach_shape,
     );
-    assert!(straight.y > 0.5 * straight.norm(), "{straight}");
+    assert!(straight.y > 0.2 * straight.norm(), "{straight}");
     // 40 m off every road (the view's shorter side is ~31 m at 45 m): straight.
     assert!(t
-        .along_the_roads(&Enu2::new(300.0, 40.0), &Enu2::new(600.0, 300.0), horizon_s)
+        .along_the_roads(&Enu2::new(100.0, 40.0), &waypoint, horizon_s)
         .is_none());
     // From (300, 0) to (300, 790): either way round the roads is 1400 m, 1.77 x the
-    // straight line: straight.
-    assert!(t
-        .along_the_roads(&Enu2::new(300.0, 0.0), &Enu2::new(300.0, 790.0), horizon_s)
-        .is_none());
+    // straight line: straight. And 1.44 x, to (600, 300) from (300, 10): straight too.
+    for (from, to) in [
+        ((300.0, 0.0), (300.0, 790.0)),
+        ((300.0, 10.0), (600.0, 300.0)),
+    ] {
+        let (from, to) = (Enu2::new(from.0, from.1), Enu2::new(to.0, to.1));
+        assert!(
+            t.along_the_roads(&from, &to, horizon_s).is_none(),
+            "{from} {to}"
+        );
+    }
 }
