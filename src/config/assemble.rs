@@ -231,6 +231,11 @@ impl Config {
             lawn: self.guidance.lawn.clone(),
             failsafe: failsafe.then(|| self.failsafe()),
             cue: self.cue_region(),
+            cue_prior: self
+                .acquisition
+                .as_ref()
+                .and_then(|a| a.prior)
+                .unwrap_or_default(),
             cue_speeds_mps: self.cue_speeds_mps(),
             respread_after_s: Some(self.daemon.target_lost_after_s),
             injection_share: self.filter.hypothesis_injection,

@@ -140,6 +140,13 @@ pub struct AcquisitionConfig {
     /// cued target is on the move). 0: the target may be standing.
     #[serde(default)]
     pub min_speed_mps: Option<f64>,
+    /// How the belief is spread over the roads within the cue's radius (and, until the
+    /// first sighting, the re-spread from them): `traffic`, each road by its share of the
+    /// traffic per metre that a car driving the road graph's turn probabilities puts on it
+    /// (past a fork, a 0.75 turn holds three times the belief of a 0.25 one), or `length`,
+    /// by length alone (before session 55). Absent: `traffic`.
+    #[serde(default)]
+    pub prior: Option<crate::world::road::RoadWeighting>,
 }
 
 /// The daemon's settings (`infotrack run`).

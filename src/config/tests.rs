@@ -202,6 +202,27 @@ fn a_cue_outside_the_workspace_or_off_every_road_names_the_key() {
         let e = load(&cued(bad)).unwrap_err().to_string();
         assert!(e.contains("acquisition.min_speed_mps"), "{bad}: {e}");
     }
+    // The prior: by traffic unless the config says `length`; another name is refused
+    // with the line, the key and the names it takes.
+    let prior = |v: &str| format!("{}prior = \"{v}\"\n", with("[20.0, 10.0]", "150.0"));
+    let assembled = |t: &str| {
+        load(t)
+            .unwrap()
+            .tracker_params(crate::guidance::GuidanceKind::Eer, false)
+            .cue_prior
+    };
+    use crate::world::road::RoadWeighting;
+    assert_eq!(
+        assembled(&with("[20.0, 10.0]", "150.0")),
+        RoadWeighting::Traffic
+    );
+    assert_eq!(assembled(&prior("length")), RoadWeighting::Length);
+    assert_eq!(assembled(&prior("traffic")), RoadWeighting::Traffic);
+    let e = load(&prior("uniform")).unwrap_err().to_string();
+    assert!(
+        e.contains("prior = \"uniform\"") && e.contains("traffic") && e.contains("length"),
+        "{e}"
+    );
     // Unknown keys are errors there too.
     let e = load(&format!(
         "{}cue_height_m = 3.0\n",

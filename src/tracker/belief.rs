@@ -148,7 +148,10 @@ impl Tracker {
         let (tm, start) = match (self.last_measurement, self.params.cue) {
             (Some((tm, zm)), _) => (tm, RouteStart::At(zm, self.last_seen_heading())),
             (None, Some(cue)) => {
-                cue_roads = self.world.road.roads_within(Some(cue));
+                cue_roads = self
+                    .world
+                    .road
+                    .weighted_within(Some(cue), self.params.cue_prior);
                 if cue_roads.length_m() <= 0.0 {
                     return false;
                 }

@@ -39,6 +39,7 @@ use crate::metrics::StepRecord;
 use crate::motion::{self, MotionError, MotionParams};
 use crate::rng::CoreRng;
 use crate::world::camera::View;
+use crate::world::road::RoadWeighting;
 use crate::world::World;
 
 /// How far back the measured track reaches for the target's last seen velocity, s.
@@ -138,6 +139,9 @@ pub struct TrackerParams {
     /// The operator's cue (centre, radius, world ENU): the filter starts on the roads
     /// within it; `None`: on the whole road network.
     pub cue: Option<(Enu2, f64)>,
+    /// How the cue's belief is spread over its roads (the prior, and the re-spread until
+    /// the first sighting): by traffic or by length.
+    pub cue_prior: RoadWeighting,
     /// The speeds, m/s, of the hypotheses drawn before the first sighting: the prior from
     /// the cue and the re-spreads from its roads (without a cue, the lab's whole-network
     /// prior, from 0); see [`DEFAULT_CUE_MIN_SPEED_SHARE`].
@@ -246,13 +250,23 @@ impl Tracker {
         check_combination(params.guidance, estimator)?;
         let built = match estimator {
             EstimatorKind::Particle(name) => Estimator::Particle {
-                pf: Box::new(ParticleFilter::on_roads(
-                    params.filter.clone(),
-                    &world,
-                    params.cue,
-                    params.cue_speeds_mps.clone(),
-                    &mut rng_filter,
-                )),
+                pf: Box::new(match params.cue {
+                    Some(cue) => ParticleFilter::on_weighted_roads(
+                        params.filter.clone(),
+                        &world,
+                        cue,
+                        params.cue_prior,
+                        params.cue_speeds_mps.clone(),
+                        &mut rng_filter,
+                    ),
+                    None => ParticleFilter::on_roads(
+                        params.filter.clone(),
+                        &world,
+                        None,
+                        params.cue_speeds_mps.clone(),
+                        &mut rng_filter,
+                    ),
+                }),
                 model: motion::build(name, &params.motion)?,
             },
             EstimatorKind::Kalman => {

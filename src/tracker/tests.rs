@@ -227,6 +227,45 @@ fn eer_with_a_kalman_estimator_is_refused_with_a_reason() {
     assert!(msg.contains("eer") && msg.contains("particle"), "{msg}");
 }
 
+/// The prior from a cue is drawn by traffic, not by length: at outdoor's node 1 (600, 0)
+/// the car goes on east with p 0.6 and turns north with p 0.4, so within 100 m of it the
+/// road on east holds 1.5 times the particles that drive north; with `acquisition.prior =
+/// "length"`, as many.
+#[test]
+fn the_prior_from_a_cue_follows_the_traffic_at_a_fork() {
+    let east_over_north = |prior| {
+        let mut c = outdoor_config();
+        c.acquisition = Some(crate::config::AcquisitionConfig {
+            cue_enu_m: [600.0, 0.0],
+            cue_radius_m: 100.0,
+            min_speed_mps: None,
+            prior,
+        });
+        let (mut east, mut north) = (0usize, 0usize);
+        for seed in 1..=4 {
+            let t = tracker_with(&c, GuidanceKind::Eer, false, "cv", seed);
+            let h = t.estimator().particle_filter().unwrap().histories();
+            let k = h.k_in();
+            for i in 0..h.len() {
+                let (p, v) = (h.at(i, k - 1), h.at(i, k - 1) - h.at(i, k - 2));
+                if p.x > 600.5 && v.x > 0.0 {
+                    east += 1;
+                } else if (p.x - 600.0).abs() < 0.5 && v.y > 0.0 {
+                    north += 1;
+                }
+            }
+        }
+        (
+            east as f64 / north as f64,
+            format!("east {east}, north {north}"),
+        )
+    };
+    let (by_traffic, counts) = east_over_north(None);
+    assert!((1.3..=1.7).contains(&by_traffic), "{counts}");
+    let (by_length, counts) = east_over_north(Some(RoadWeighting::Length));
+    assert!((0.85..=1.15).contains(&by_length), "{counts}");
+}
+
 #[test]
 fn the_prior_is_on_the_roads_within_the_cue() {
     let mut c = outdoor_config();
@@ -235,6 +274,7 @@ fn the_prior_is_on_the_roads_within_the_cue() {
         cue_enu_m: [cue.x, cue.y],
         cue_radius_m: r,
         min_speed_mps: None,
+        prior: None,
     });
     let t = tracker(&c, GuidanceKind::Eer, false);
     let pf = t.estimator().particle_filter().unwrap();

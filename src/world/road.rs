@@ -6,7 +6,9 @@ use super::geometry::Enu2;
 use serde::{Deserialize, Serialize};
 
 mod route;
+mod traffic;
 pub use route::RoadPath;
+pub use traffic::RoadWeighting;
 
 /// A node of the road network.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -75,6 +77,9 @@ pub struct RoadNetwork {
     near_tolerance_m: f64,
     /// The roads as an undirected graph weighed by length ([`Self::path_between`]).
     graph: petgraph::graph::UnGraph<Enu2, f64>,
+    /// The traffic per metre of each of `segments`, relative to the mean edge's
+    /// ([`Self::traffic_within`]).
+    traffic_per_m: Vec<f64>,
 }
 
 impl RoadNetwork {
@@ -101,8 +106,10 @@ impl RoadNetwork {
             segments: Vec::new(),
             near_tolerance_m: f64::INFINITY,
             graph: Default::default(),
+            traffic_per_m: Vec::new(),
         };
         road.segments = road.edges_enu();
+        road.traffic_per_m = traffic::traffic_per_m(&road.nodes);
         road.graph = route::undirected_graph(&road);
         let shortest = road
             .segments
@@ -171,6 +178,43 @@ impl RoadNetwork {
             pieces,
             weights,
             total,
+        }
+    }
+
+    /// [`Self::roads_within`] weighted by traffic: each edge's part in `region` weighs its
+    /// traffic flow per metre (the road graph's Markov chain in the long run, see
+    /// `traffic.rs`), so that a point drawn from them is where a car driving the graph is
+    /// likely to be. The prior from an operator's cue.
+    pub fn traffic_within(&self, region: Option<(Enu2, f64)>) -> RoadPieces {
+        let mut out = RoadPieces {
+            pieces: Vec::new(),
+            weights: Vec::new(),
+            total: 0.0,
+        };
+        for (&(a, b), &w) in self.segments.iter().zip(&self.traffic_per_m) {
+            let clipped = match region {
+                None => Some((a, b)),
+                Some((c, r)) => clip_to_disc(a, b, c, r),
+            };
+            if let Some((a, b)) = clipped.filter(|(a, b)| (b - a).norm() > 1e-9 && w > 0.0) {
+                out.pieces.push((a, b));
+                out.weights.push(w);
+            }
+        }
+        out.sum_total();
+        out
+    }
+
+    /// The roads within `region` weighted as `weighting` says: [`Self::traffic_within`] or
+    /// [`Self::roads_within`].
+    pub fn weighted_within(
+        &self,
+        region: Option<(Enu2, f64)>,
+        weighting: RoadWeighting,
+    ) -> RoadPieces {
+        match weighting {
+            RoadWeighting::Traffic => self.traffic_within(region),
+            RoadWeighting::Length => self.roads_within(region),
         }
     }
 

@@ -19,6 +19,28 @@ impl ParticleFilter {
         pf
     }
 
+    /// A filter with particles on the roads within `region` (a centre and a radius, world
+    /// ENU) drawn as `weighting` says (by traffic: where a car driving the road graph is
+    /// likely to be, [`crate::world::road::RoadNetwork::traffic_within`]), each moving along
+    /// its road's allowed direction at a speed drawn from `speeds_mps`; as
+    /// [`Self::on_roads`] where no road in the region carries weight.
+    pub fn on_weighted_roads<R: Rng + ?Sized>(
+        params: FilterParams,
+        world: &World,
+        region: (Enu2, f64),
+        weighting: crate::world::road::RoadWeighting,
+        speeds_mps: std::ops::RangeInclusive<f64>,
+        rng: &mut R,
+    ) -> Self {
+        let roads = world.road.weighted_within(Some(region), weighting);
+        if roads.length_m() <= 0.0 {
+            return Self::on_roads(params, world, Some(region), speeds_mps, rng);
+        }
+        let mut pf = Self::new(params, world.workspace_enu, rng);
+        pf.spread_on_pieces(&roads, speeds_mps, rng);
+        pf
+    }
+
     /// Starts over on the roads within `region` (see [`Self::on_roads`]); where no road
     /// lies in the region, on the whole network; without roads, over the workspace.
     pub fn spread_on_roads<R: Rng + ?Sized>(

@@ -487,3 +487,74 @@ fn the_road_path_turns_at_the_junction_and_runs_either_way() {
         assert!((same.length_m() - 300.0).abs() < 1e-9, "{same:?}");
     }
 }
+
+/// A loop with a fork: 0 -> 1 east, at 1 north to 2 with p 0.75 or south to 3 with p 0.25,
+/// both back to 0. Every branch 100 m or so; the car drives it forever.
+fn loop_with_a_fork() -> RoadNetwork {
+    network(
+        &[
+            (0, 0.0, 0.0),
+            (1, 100.0, 0.0),
+            (2, 100.0, 100.0),
+            (3, 100.0, -100.0),
+        ],
+        &[
+            (0, 1, 1.0),
+            (1, 2, 0.75),
+            (1, 3, 0.25),
+            (2, 0, 1.0),
+            (3, 0, 1.0),
+        ],
+    )
+}
+
+/// The share of `n` points drawn from `pieces` that fall in the half plane y > 0.
+fn share_north(pieces: &RoadPieces, n: usize, rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
+    let north = (0..n)
+        .filter(|_| pieces.sample(rng).expect("a road").0.y > 1e-9)
+        .count();
+    north as f64 / n as f64
+}
+
+#[test]
+fn traffic_follows_the_turn_probabilities_and_length_alone_does_not() {
+    let road = loop_with_a_fork();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    // Within 60 m of the fork: 60 m of each branch up and down, 60 m of the road in.
+    let region = Some((Enu2::new(100.0, 0.0), 60.0));
+    // By traffic, the branch north carries 0.75 of what passes the fork, the south 0.25,
+    // and the road in all of it: north 0.75 / (1 + 0.75 + 0.25) of the points.
+    let by_traffic = share_north(&road.traffic_within(region), 20_000, &mut rng);
+    assert!((by_traffic - 0.375).abs() < 0.015, "{by_traffic}");
+    // By length, a third each.
+    let by_length = share_north(&road.roads_within(region), 20_000, &mut rng);
+    assert!((by_length - 1.0 / 3.0).abs() < 0.015, "{by_length}");
+    // The return legs carry the same traffic as the branches they come from: far from
+    // the fork, on 2 -> 0 (from (100, 100) to (0, 0)) against 3 -> 0.
+    let w: Vec<f64> = road.traffic_within(None).pieces().map(|(_, w)| w).collect();
+    // Segments in node order: 0->1, 1->2, 1->3, 2->0, 3->0.
+    assert!((w[1] / w[2] - 3.0).abs() < 1e-6, "{w:?}");
+    assert!((w[3] / w[4] - 3.0).abs() < 1e-6, "{w:?}");
+    assert!((w[0] / (w[1] + w[2]) - 1.0).abs() < 1e-6, "{w:?}");
+}
+
+#[test]
+fn on_a_ring_every_road_carries_the_same_traffic() {
+    // A one-way ring of four: a periodic chain, for which plain power iteration would
+    // never settle; the lazy chain does.
+    let road = network(
+        &[
+            (0, 0.0, 0.0),
+            (1, 100.0, 0.0),
+            (2, 100.0, 100.0),
+            (3, 0.0, 100.0),
+        ],
+        &[(0, 1, 1.0), (1, 2, 1.0), (2, 3, 1.0), (3, 0, 1.0)],
+    );
+    for (_, w) in road.traffic_within(None).pieces() {
+        assert!((w - 1.0).abs() < 1e-9, "{w}");
+    }
+    // Outside every road: nothing.
+    let far = road.traffic_within(Some((Enu2::new(1000.0, 1000.0), 10.0)));
+    assert_eq!(far.length_m(), 0.0);
+}
