@@ -578,13 +578,16 @@ pub struct GuidanceConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_escape_floor: Option<f64>,
     /// Which way the camera's image faces: `north` (the paper's constant heading, the image's
-    /// width along world east) or `along_track` (the image's width, its long side, along the
+    /// width along world east), `along_track` (the image's width, its long side, along the
     /// direction of travel, a chased car's road; the vehicle turns at
     /// `agent.yaw_rate_limit_rad_s`, and EER judges each candidate at the heading the vehicle
-    /// will have there). Optional; absent, `along_track` with an `[acquisition]` cue (a
-    /// field flight: the outdoor closed loop seeds 1-3 kept the car in view 80-81 % of the
-    /// frames instead of 73-80 %, BENCHMARKS "Field scale, part 47") and `north` without
-    /// one (the paper's lab, whose numbers stay the paper's).
+    /// will have there) or `informed` (EER judges each candidate at the `along_track` heading
+    /// and a quarter turn from it and flies the better: the long side across a covered
+    /// junction's two exits; level with `along_track` on average, BENCHMARKS "Field scale,
+    /// part 54"; other laws fly `along_track`). Optional; absent, `along_track` with an
+    /// `[acquisition]` cue (a field flight: the outdoor closed loop seeds 1-3 kept the car in
+    /// view 80-81 % of the frames instead of 73-80 %, BENCHMARKS "Field scale, part 47") and
+    /// `north` without one (the paper's lab, whose numbers stay the paper's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub view_heading: Option<crate::guidance::ViewHeading>,
     /// The lawnmower sweep.

@@ -430,6 +430,11 @@ fn the_view_heading_defaults_by_the_cue_and_a_wrong_one_is_refused() {
     })
     .unwrap();
     assert_eq!(set.heading_rule().kind, ViewHeading::AlongTrack);
+    let informed = load_modified(|t| {
+        tbl(t, "guidance").insert("view_heading".into(), "informed".into());
+    })
+    .unwrap();
+    assert_eq!(informed.heading_rule().kind, ViewHeading::Informed);
     let err = load_modified(|t| {
         tbl(t, "guidance").insert("view_heading".into(), "nose".into());
     })
@@ -437,7 +442,9 @@ fn the_view_heading_defaults_by_the_cue_and_a_wrong_one_is_refused() {
     .to_string();
     // The parser's message: the line, the key, the value and the names it takes.
     assert!(
-        err.contains("view_heading = \"nose\"") && err.contains("along_track"),
+        err.contains("view_heading = \"nose\"")
+            && err.contains("along_track")
+            && err.contains("informed"),
         "{err}"
     );
 }

@@ -137,8 +137,11 @@ pub struct EerDecision {
     pub eer: f64,
     /// Entropy of the current estimate.
     pub h_now: f64,
-    /// Number of candidates evaluated.
+    /// Number of candidates evaluated (each view of a place counts once).
     pub candidates: usize,
+    /// The heading (world ENU yaw, rad) of the chosen candidate's view: where the heading
+    /// rule offers more than one view of a place (`informed`), the one to fly.
+    pub view_yaw_enu_rad: f64,
 }
 
 /// The region the agent can reach within the horizon, as its speed limit shapes it.
@@ -760,7 +763,7 @@ impl EerPlanner {
             world,
         );
         let horizon_s = p.horizon_steps as f64 * p.step_s;
-        let leads = match p.intercept_within_s {
+        let mut leads = match p.intercept_within_s {
             Some(within_s) if horizon_s > 0.0 && self.intercepts_on => intercepts(
                 &self.inputs,
                 &mut cands,
@@ -776,8 +779,21 @@ impl EerPlanner {
         let over_target = self.over_target_velocity_enu;
         let views: Vec<View> = cands
             .iter()
-            .map(|c| heading.view_over(agent, c, over_target))
+            .flat_map(|c| heading.views_over(agent, c, over_target))
             .collect();
+        // Each place as often as it has views, and with its lead for each.
+        let per_place = views.len() / cands.len().max(1);
+        if per_place > 1 {
+            cands = cands
+                .iter()
+                .flat_map(|c| std::iter::repeat(*c).take(per_place))
+                .collect();
+            let leads_per_place: Vec<f64> = leads
+                .iter()
+                .flat_map(|l| std::iter::repeat(*l).take(per_place))
+                .collect();
+            leads = leads_per_place;
+        }
         let (h0, eer) = evaluate_fast_led(
             &self.inputs,
             &views,
@@ -797,6 +813,7 @@ impl EerPlanner {
             share: p.centring_share,
         };
         let best = committed_choice(&eer, &cands, previous, p.search_commitment, Some(centring));
+        let view_yaw_enu_rad = best.map_or(agent.yaw_enu_rad, |i| views[i].yaw_enu_rad);
         let waypoint = match best {
             Some(i) => cands[i],
             // Nothing to choose between (no candidate sees any particle): head for the
@@ -811,7 +828,8 @@ impl EerPlanner {
                 |i| eer[i],
             ),
             h_now: h0,
-            candidates: cands.len(),
+            candidates: cands.len() / per_place.max(1),
+            view_yaw_enu_rad,
         }
     }
 

@@ -28,11 +28,16 @@ pub enum ViewHeading {
     /// velocity (the target's, riding along with it), or the way to its setpoint; near the
     /// setpoint and at rest, the heading the view has ([`HeadingRule::yaw_enu_rad`]).
     AlongTrack,
+    /// EER chooses: each candidate is judged at the `along_track` heading and a quarter turn
+    /// from it, and the plan flies the view that scores higher ([`HeadingRule::views_over`]).
+    /// A long side across the track sees both exits of a covered junction whose exits lie
+    /// on either side of the way the car went in. Laws other than EER fly `along_track`.
+    Informed,
 }
 
 /// A heading name that names none.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("`{0}` (expected north or along_track)")]
+#[error("`{0}` (expected north, along_track or informed)")]
 pub struct UnknownViewHeading(pub String);
 
 impl std::str::FromStr for ViewHeading {
@@ -41,6 +46,7 @@ impl std::str::FromStr for ViewHeading {
         match s {
             "north" => Ok(Self::North),
             "along_track" => Ok(Self::AlongTrack),
+            "informed" => Ok(Self::Informed),
             other => Err(UnknownViewHeading(other.to_string())),
         }
     }
@@ -71,7 +77,7 @@ impl HeadingRule {
     pub fn yaw_enu_rad(&self, now: &View, setpoint_enu: &Enu2, velocity_enu: &Enu2) -> f64 {
         match self.kind {
             ViewHeading::North => NORTH_VIEW_YAW_ENU_RAD,
-            ViewHeading::AlongTrack => {
+            ViewHeading::AlongTrack | ViewHeading::Informed => {
                 let to_go = setpoint_enu - now.centre_enu;
                 let way = if velocity_enu.norm() >= MIN_HEADING_SPEED_MPS {
                     velocity_enu.y.atan2(velocity_enu.x)
@@ -97,6 +103,23 @@ impl HeadingRule {
     ) -> View {
         let v = over_target_velocity_enu.unwrap_or_else(Enu2::zeros);
         View::new(*candidate_enu, self.yaw_enu_rad(now, candidate_enu, &v))
+    }
+
+    /// The views EER judges over `candidate_enu`: [`Self::view_over`]'s, and under
+    /// `informed` also the one a quarter turn from it (of its two equal footprints, the
+    /// nearer `now`'s heading), second, so that of two equal scores the first stays.
+    pub fn views_over(
+        &self,
+        now: &View,
+        candidate_enu: &Enu2,
+        over_target_velocity_enu: Option<Enu2>,
+    ) -> impl Iterator<Item = View> {
+        let first = self.view_over(now, candidate_enu, over_target_velocity_enu);
+        let turned = (self.kind == ViewHeading::Informed).then(|| {
+            let yaw = nearer_of_the_two(first.yaw_enu_rad + FRAC_PI_2, now.yaw_enu_rad);
+            View::new(*candidate_enu, yaw)
+        });
+        std::iter::once(first).chain(turned)
     }
 }
 
@@ -164,11 +187,45 @@ mod tests {
     }
 
     #[test]
+    fn informed_offers_the_rules_view_and_a_quarter_turn_from_it() {
+        let now = View::new(Enu2::new(10.0, 0.0), 1.0);
+        let at = Enu2::new(80.0, 0.0);
+        for kind in [ViewHeading::North, ViewHeading::AlongTrack] {
+            let rule = HeadingRule {
+                kind,
+                settle_m: 5.0,
+            };
+            let views: Vec<View> = rule.views_over(&now, &at, None).collect();
+            assert_eq!(views, vec![rule.view_over(&now, &at, None)]);
+        }
+        let along = HeadingRule {
+            kind: ViewHeading::AlongTrack,
+            settle_m: 5.0,
+        };
+        let informed = HeadingRule {
+            kind: ViewHeading::Informed,
+            ..along
+        };
+        for velocity in [None, Some(Enu2::new(0.0, -8.0))] {
+            let views: Vec<View> = informed.views_over(&now, &at, velocity).collect();
+            assert_eq!(views.len(), 2);
+            // First the along-track view; then a quarter turn from it, the turn of the two
+            // equal footprints nearer where the vehicle faces.
+            assert_eq!(views[0], along.view_over(&now, &at, velocity));
+            let turn = wrap_angle(views[1].yaw_enu_rad - views[0].yaw_enu_rad);
+            assert!((turn.abs() - FRAC_PI_2).abs() < 1e-12, "{turn}");
+            assert!(wrap_angle(views[1].yaw_enu_rad - 1.0).abs() <= FRAC_PI_2 + 1e-12);
+            assert!(views.iter().all(|v| v.centre_enu == at));
+        }
+    }
+
+    #[test]
     fn names_parse_and_a_wrong_one_says_what_is_expected() {
         assert_eq!(
             "along_track".parse::<ViewHeading>(),
             Ok(ViewHeading::AlongTrack)
         );
+        assert_eq!("informed".parse::<ViewHeading>(), Ok(ViewHeading::Informed));
         assert_eq!("north".parse::<ViewHeading>(), Ok(ViewHeading::North));
         let e = "nose".parse::<ViewHeading>().unwrap_err().to_string();
         assert!(e.contains("nose") && e.contains("along_track"), "{e}");

@@ -34,6 +34,7 @@ use crate::estimation::{
 use crate::frames::Enu2;
 use crate::guidance::{
     EerParams, EerPlanner, GuidanceKind, HeadingRule, LawnConfig, LawnmowerPath, ReachShape,
+    ViewHeading,
 };
 use crate::metrics::StepRecord;
 use crate::motion::{self, MotionError, MotionParams};
@@ -221,6 +222,10 @@ pub struct Tracker {
     command: Option<Command>,
     entropy: f64,
     last_eer: f64,
+    /// The view heading EER chose with its waypoint (world ENU yaw, rad), for the command
+    /// to fly, when the heading rule lets EER choose (`informed`) and the waypoint is near
+    /// enough to be seen as judged; `None` otherwise (the rule sets the heading).
+    planned_view_yaw_enu_rad: Option<f64>,
     /// How many times the belief was spread again in the current spell without
     /// measurements.
     respreads_in_spell: u32,
@@ -292,6 +297,7 @@ impl Tracker {
             command: None,
             entropy: f64::NAN,
             last_eer: f64::NAN,
+            planned_view_yaw_enu_rad: None,
             respreads_in_spell: 0,
             last_seen_speed_mps: 0.0,
             recent_speeds: std::collections::VecDeque::new(),

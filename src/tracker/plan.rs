@@ -19,6 +19,7 @@ impl Tracker {
             return Ok(None);
         }
         let started = clock.now_s();
+        self.planned_view_yaw_enu_rad = None;
         let decided = self.choose(t_s, vehicle, truth);
         let compute_ms = (clock.now_s() - started) * 1e3;
         let failsafe = self.params.failsafe;
@@ -40,14 +41,14 @@ impl Tracker {
         let command = match command {
             Some((position_enu, velocity_enu)) => {
                 let position_enu = self.world.workspace_enu.clamp(&position_enu);
+                let by_rule =
+                    self.params
+                        .heading
+                        .yaw_enu_rad(vehicle, &position_enu, &velocity_enu);
                 Command::GoTo {
                     position_enu,
                     velocity_enu,
-                    view_yaw_enu_rad: self.params.heading.yaw_enu_rad(
-                        vehicle,
-                        &position_enu,
-                        &velocity_enu,
-                    ),
+                    view_yaw_enu_rad: self.planned_view_yaw_enu_rad.unwrap_or(by_rule),
                 }
             }
             None => Command::HoldHere,
@@ -172,6 +173,11 @@ impl Tracker {
             over_target_velocity_enu
         };
         let far = velocity_enu != Enu2::zeros() && over_target_velocity_enu == Enu2::zeros();
+        // A waypoint flown to in transit is judged at the heading the transit gives; a near
+        // one is flown at the view EER judged best there.
+        if !far && self.params.heading.kind == ViewHeading::Informed {
+            self.planned_view_yaw_enu_rad = Some(d.view_yaw_enu_rad);
+        }
         if far && searching && self.params.cue.is_some() {
             if let Some(along) = self.along_the_roads(vehicle_enu, &d.waypoint_enu, horizon_s) {
                 return Ok(along);

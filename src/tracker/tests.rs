@@ -358,14 +358,17 @@ fn eer_over_a_concentrated_belief_moves_with_the_target() {
 }
 
 /// Following a car driving north (the road x = 1200 m): under `view_heading = "north"` every
-/// command faces north; under `along_track` the view turns its long side (the image's
-/// width) along the car's track, north-south, whichever law plans (EER or the mean).
+/// command faces north; under `along_track` and `informed` the view turns its long side (the
+/// image's width) along the car's track, north-south, whichever law plans (EER or the mean).
 #[test]
 fn the_view_heading_rule_turns_the_commands_view_along_the_track() {
     for (rule, law) in [
         (ViewHeading::North, GuidanceKind::Pfwm),
         (ViewHeading::AlongTrack, GuidanceKind::Pfwm),
         (ViewHeading::AlongTrack, GuidanceKind::Eer),
+        // Over the car, both of informed's views hold the belief: the first, along it, stays.
+        (ViewHeading::Informed, GuidanceKind::Pfwm),
+        (ViewHeading::Informed, GuidanceKind::Eer),
     ] {
         let mut c = outdoor_config();
         c.guidance.view_heading = Some(rule);
@@ -399,7 +402,7 @@ fn the_view_heading_rule_turns_the_commands_view_along_the_track() {
                 .iter()
                 .all(|y| *y == crate::world::camera::NORTH_VIEW_YAW_ENU_RAD)),
             // The image's top east or west: its width north-south, along the road.
-            ViewHeading::AlongTrack => assert!(
+            ViewHeading::AlongTrack | ViewHeading::Informed => assert!(
                 crate::frames::wrap_angle(2.0 * last).abs() < 0.3,
                 "{law}: {yaws:?}"
             ),

@@ -171,14 +171,7 @@ impl RoadNetwork {
 
     /// The roads within `region`, clipped once, to draw many points from.
     pub fn roads_within(&self, region: Option<(Enu2, f64)>) -> RoadPieces {
-        let pieces = self.pieces_within(region);
-        let total = pieces.iter().map(|(a, b)| (b - a).norm()).sum();
-        let weights = vec![1.0; pieces.len()];
-        RoadPieces {
-            pieces,
-            weights,
-            total,
-        }
+        self.weighted_pieces_within(region, std::iter::repeat(1.0))
     }
 
     /// [`Self::roads_within`] weighted by traffic: each edge's part in `region` weighs its
@@ -186,18 +179,25 @@ impl RoadNetwork {
     /// `traffic.rs`), so that a point drawn from them is where a car driving the graph is
     /// likely to be. The prior from an operator's cue.
     pub fn traffic_within(&self, region: Option<(Enu2, f64)>) -> RoadPieces {
+        self.weighted_pieces_within(region, self.traffic_per_m.iter().copied())
+    }
+
+    /// The parts of every directed edge inside `region` (as [`Self::pieces_within`]), each
+    /// weighing its edge's entry of `weight_per_m` (in the order of the segments); edges of
+    /// weight 0 are left out, as no point can be drawn from them.
+    fn weighted_pieces_within(
+        &self,
+        region: Option<(Enu2, f64)>,
+        weight_per_m: impl Iterator<Item = f64>,
+    ) -> RoadPieces {
         let mut out = RoadPieces {
             pieces: Vec::new(),
             weights: Vec::new(),
             total: 0.0,
         };
-        for (&(a, b), &w) in self.segments.iter().zip(&self.traffic_per_m) {
-            let clipped = match region {
-                None => Some((a, b)),
-                Some((c, r)) => clip_to_disc(a, b, c, r),
-            };
-            if let Some((a, b)) = clipped.filter(|(a, b)| (b - a).norm() > 1e-9 && w > 0.0) {
-                out.pieces.push((a, b));
+        for (&(a, b), w) in self.segments.iter().zip(weight_per_m) {
+            if let Some(piece) = clip_piece(a, b, region).filter(|_| w > 0.0) {
+                out.pieces.push(piece);
                 out.weights.push(w);
             }
         }
@@ -241,12 +241,7 @@ impl RoadNetwork {
     fn pieces_within(&self, region: Option<(Enu2, f64)>) -> Vec<(Enu2, Enu2)> {
         self.segments
             .iter()
-            .copied()
-            .filter_map(|(a, b)| match region {
-                None => Some((a, b)),
-                Some((c, r)) => clip_to_disc(a, b, c, r),
-            })
-            .filter(|(a, b)| (b - a).norm() > 1e-9)
+            .filter_map(|&(a, b)| clip_piece(a, b, region))
             .collect()
     }
 
@@ -618,6 +613,16 @@ impl RoadPieces {
         let (a, b) = self.pieces.last()?;
         Some((*b, (b - a).normalize()))
     }
+}
+
+/// The part of the directed edge a-b inside `region` (a disc: centre and radius, world
+/// ENU; `None`: the whole edge), if any of non-zero length.
+fn clip_piece(a: Enu2, b: Enu2, region: Option<(Enu2, f64)>) -> Option<(Enu2, Enu2)> {
+    let clipped = match region {
+        None => Some((a, b)),
+        Some((c, r)) => clip_to_disc(a, b, c, r),
+    };
+    clipped.filter(|(a, b)| (b - a).norm() > 1e-9)
 }
 
 /// The part of segment a-b inside the disc (centre c, radius r), if any.

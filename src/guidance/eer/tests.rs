@@ -3,6 +3,7 @@ use rand::{Rng, SeedableRng};
 
 use super::*;
 use crate::estimation::RouteStart;
+use crate::guidance::ViewHeading;
 use crate::motion::ConstantVelocity;
 use crate::rng::CoreRng;
 
@@ -728,4 +729,68 @@ fn the_escape_weighting_applies_only_when_the_tracker_turns_it_on() {
         .clone();
     weighed.decide(&View::north(agent), &HeadingRule::north(), &world);
     assert_ne!(weighed.inputs().weights, before);
+}
+
+/// A belief split 40 m apart north and south of where the drone hovers facing north (a
+/// covered junction's two exits): the 31 m side of the view north-south holds one exit at
+/// most, the 58 m side both. `along_track` judges each candidate at the heading the way
+/// there gives (over the middle, where it is: north, the long side east-west); `informed`
+/// judges it a quarter turn from that too, flies the view over the middle with its long
+/// side north-south, and that view's EER is the higher.
+#[test]
+fn informed_heading_turns_the_long_side_across_two_exits() {
+    let c = outdoor();
+    let mut world = c.world();
+    world.occlusions.clear();
+    let fp = world.footprint;
+    assert!(fp.half_width_m - world.detection_margin_m > 22.0 && fp.half_height_m < 20.0);
+    let mut rng = CoreRng::seed_from_u64(11);
+    let centre = Enu2::new(300.0, 400.0);
+    let mut inp = EerInputs {
+        n_m: 1,
+        ..Default::default()
+    };
+    let n = 40;
+    for k in 0..n {
+        let side = if k % 2 == 0 { 20.0 } else { -20.0 };
+        let p = centre + Enu2::new(rng.gen_range(-1.0..1.0), side + rng.gen_range(-1.0..1.0));
+        inp.current.push(p);
+        inp.predicted.push(p);
+        inp.velocity.push(Enu2::zeros());
+        inp.weights.push(1.0 / n as f64);
+        inp.measurements
+            .push(world.measurement.measure(&p, &mut rng));
+        inp.alpha.push(1.0 / n as f64);
+    }
+    let agent = View::north(centre);
+    // The reachable grid reduced to the drone's own place: the candidates are the two
+    // exits' particles (flown to, the view's long side along the way there: one exit seen)
+    // and the place between them.
+    let mut params = c.eer_params();
+    params.grid_side = 1;
+    let decide = |kind: ViewHeading| {
+        let mut planner = EerPlanner::new(params.clone());
+        planner.inputs = inp.clone();
+        let rule = HeadingRule {
+            kind,
+            settle_m: fp.quarter_view_m(),
+        };
+        planner.decide(&agent, &rule, &world)
+    };
+    let along = decide(ViewHeading::AlongTrack);
+    let informed = decide(ViewHeading::Informed);
+    // Along the track: one exit. Informed: over the middle, the image's top east or west
+    // (its width north-south).
+    assert!((along.waypoint_enu - centre).norm() > 15.0, "{along:?}");
+    let yaw = informed.view_yaw_enu_rad;
+    assert!(crate::frames::wrap_angle(2.0 * yaw).abs() < 1e-9, "{yaw}");
+    assert_eq!(informed.waypoint_enu, centre);
+    assert!(
+        informed.eer > along.eer + 0.1,
+        "{} {}",
+        informed.eer,
+        along.eer
+    );
+    // Each place counts once, whatever its number of views.
+    assert_eq!(informed.candidates, along.candidates);
 }

@@ -56,12 +56,15 @@ pub(super) fn traffic_per_m(nodes: &[RoadNode]) -> Vec<f64> {
     for _ in 0..MAX_ITERATIONS {
         next.iter_mut().for_each(|x| *x = 0.0);
         for (u, node) in nodes.iter().enumerate() {
-            let moving = if out_sum[u] > 0.0 { 0.5 * pi[u] } else { 0.0 };
+            if out_sum[u] <= 0.0 {
+                // A node without a way out keeps what reaches it.
+                next[u] += pi[u];
+                continue;
+            }
+            let moving = 0.5 * pi[u];
             next[u] += pi[u] - moving;
             for &(v, p) in &node.next {
-                if out_sum[u] > 0.0 {
-                    next[v] += moving * p.max(0.0) / out_sum[u];
-                }
+                next[v] += moving * p.max(0.0) / out_sum[u];
             }
         }
         let moved: f64 = pi.iter().zip(&next).map(|(a, b)| (a - b).abs()).sum();
