@@ -763,7 +763,7 @@ impl EerPlanner {
             world,
         );
         let horizon_s = p.horizon_steps as f64 * p.step_s;
-        let mut leads = match p.intercept_within_s {
+        let leads = match p.intercept_within_s {
             Some(within_s) if horizon_s > 0.0 && self.intercepts_on => intercepts(
                 &self.inputs,
                 &mut cands,
@@ -776,28 +776,20 @@ impl EerPlanner {
             ),
             _ => Vec::new(),
         };
+        // Every view of every place, each with its place and its lead.
         let over_target = self.over_target_velocity_enu;
-        let views: Vec<View> = cands
-            .iter()
-            .flat_map(|c| heading.views_over(agent, c, over_target))
-            .collect();
-        // Each place as often as it has views, and with its lead for each.
-        let per_place = views.len() / cands.len().max(1);
-        if per_place > 1 {
-            cands = cands
-                .iter()
-                .flat_map(|c| std::iter::repeat(*c).take(per_place))
-                .collect();
-            let leads_per_place: Vec<f64> = leads
-                .iter()
-                .flat_map(|l| std::iter::repeat(*l).take(per_place))
-                .collect();
-            leads = leads_per_place;
+        let (mut places, mut views, mut view_leads) = (Vec::new(), Vec::new(), Vec::new());
+        for (k, c) in cands.iter().enumerate() {
+            for view in heading.views_over(agent, c, over_target) {
+                places.push(*c);
+                views.push(view);
+                view_leads.push(leads.get(k).copied().unwrap_or(0.0));
+            }
         }
         let (h0, eer) = evaluate_fast_led(
             &self.inputs,
             &views,
-            &leads,
+            &view_leads,
             world,
             &p.kernel,
             p.miss_probability,
@@ -812,10 +804,10 @@ impl EerPlanner {
             mean_enu: predicted_mean,
             share: p.centring_share,
         };
-        let best = committed_choice(&eer, &cands, previous, p.search_commitment, Some(centring));
+        let best = committed_choice(&eer, &places, previous, p.search_commitment, Some(centring));
         let view_yaw_enu_rad = best.map_or(agent.yaw_enu_rad, |i| views[i].yaw_enu_rad);
         let waypoint = match best {
-            Some(i) => cands[i],
+            Some(i) => places[i],
             // Nothing to choose between (no candidate sees any particle): head for the
             // predicted mean, where the target most likely is.
             None => world.workspace_enu.clamp(&predicted_mean),
@@ -828,7 +820,7 @@ impl EerPlanner {
                 |i| eer[i],
             ),
             h_now: h0,
-            candidates: cands.len() / per_place.max(1),
+            candidates: cands.len(),
             view_yaw_enu_rad,
         }
     }

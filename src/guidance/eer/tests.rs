@@ -34,6 +34,30 @@ fn random_inputs(rng: &mut CoreRng, n: usize, n_m: usize, world: &World) -> EerI
     inp
 }
 
+/// A belief of `n` equally weighted particles at rest, particle `k` where `place(k, rng)`
+/// puts it, now and at the horizon's end, each with one simulated measurement.
+fn still_belief(
+    n: usize,
+    world: &World,
+    rng: &mut CoreRng,
+    mut place: impl FnMut(usize, &mut CoreRng) -> Enu2,
+) -> EerInputs {
+    let mut inp = EerInputs {
+        n_m: 1,
+        ..Default::default()
+    };
+    for k in 0..n {
+        let p = place(k, rng);
+        inp.current.push(p);
+        inp.predicted.push(p);
+        inp.velocity.push(Enu2::zeros());
+        inp.weights.push(1.0 / n as f64);
+        inp.measurements.push(world.measurement.measure(&p, rng));
+        inp.alpha.push(1.0 / n as f64);
+    }
+    inp
+}
+
 #[test]
 fn fast_eer_equals_reference_on_random_inputs() {
     let mut c = Config::default_lab();
@@ -106,22 +130,12 @@ fn eer_prefers_the_candidate_that_sees_the_particles() {
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(2);
     // All mass in a 0.3 m cluster on open floor; one candidate over it, one far away.
-    let mut inp = EerInputs {
-        n_m: 1,
-        ..Default::default()
-    };
-    for _ in 0..30 {
-        let p = Enu2::new(
+    let inp = still_belief(30, &world, &mut rng, |_, rng| {
+        Enu2::new(
             -2.2 + rng.gen_range(-0.15..0.15),
             1.3 + rng.gen_range(-0.15..0.15),
-        );
-        inp.current.push(p);
-        inp.predicted.push(p);
-        inp.weights.push(1.0 / 30.0);
-        inp.measurements
-            .push(world.measurement.measure(&p, &mut rng));
-        inp.alpha.push(1.0 / 30.0);
-    }
+        )
+    });
     let cands = [Enu2::new(-2.2, 1.3), Enu2::new(0.5, -1.0)];
     let (_, eer) = evaluate_fast(
         &inp,
@@ -141,22 +155,12 @@ fn occluded_particles_give_no_information() {
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(3);
     // Every particle inside occlusion 1: no candidate can measure or miss them.
-    let mut inp = EerInputs {
-        n_m: 1,
-        ..Default::default()
-    };
-    for _ in 0..20 {
-        let p = Enu2::new(
+    let inp = still_belief(20, &world, &mut rng, |_, rng| {
+        Enu2::new(
             -1.25 + rng.gen_range(-0.3..0.3),
             -0.6 + rng.gen_range(-0.3..0.3),
-        );
-        inp.current.push(p);
-        inp.predicted.push(p);
-        inp.weights.push(0.05);
-        inp.measurements
-            .push(world.measurement.measure(&p, &mut rng));
-        inp.alpha.push(0.05);
-    }
+        )
+    });
     let cands = [Enu2::new(-1.25, -0.6), Enu2::new(0.5, 1.5)];
     let (_, eer) = evaluate_fast(
         &inp,
@@ -431,20 +435,10 @@ fn eer_prefers_the_view_that_lies_along_the_belief() {
     let kernel = Gaussian2::new(c.guidance.entropy_kernel_cov_m2);
     let mut rng = CoreRng::seed_from_u64(5);
     let centre = Enu2::new(100.0, 50.0);
-    let mut inp = EerInputs {
-        n_m: 1,
-        ..Default::default()
-    };
     let n = 40;
-    for k in 0..n {
-        let p = centre + Enu2::new(rng.gen_range(-1.0..1.0), -25.0 + 50.0 * k as f64 / n as f64);
-        inp.current.push(p);
-        inp.predicted.push(p);
-        inp.weights.push(1.0 / n as f64);
-        inp.measurements
-            .push(world.measurement.measure(&p, &mut rng));
-        inp.alpha.push(1.0 / n as f64);
-    }
+    let inp = still_belief(n, &world, &mut rng, |k, rng| {
+        centre + Enu2::new(rng.gen_range(-1.0..1.0), -25.0 + 50.0 * k as f64 / n as f64)
+    });
     // Facing east (the width north-south, along the road), facing north (the paper's).
     let views = [View::new(centre, 0.0), View::north(centre)];
     let mut scratch = EerScratch::default();
@@ -746,22 +740,10 @@ fn informed_heading_turns_the_long_side_across_two_exits() {
     assert!(fp.half_width_m - world.detection_margin_m > 22.0 && fp.half_height_m < 20.0);
     let mut rng = CoreRng::seed_from_u64(11);
     let centre = Enu2::new(300.0, 400.0);
-    let mut inp = EerInputs {
-        n_m: 1,
-        ..Default::default()
-    };
-    let n = 40;
-    for k in 0..n {
+    let inp = still_belief(40, &world, &mut rng, |k, rng| {
         let side = if k % 2 == 0 { 20.0 } else { -20.0 };
-        let p = centre + Enu2::new(rng.gen_range(-1.0..1.0), side + rng.gen_range(-1.0..1.0));
-        inp.current.push(p);
-        inp.predicted.push(p);
-        inp.velocity.push(Enu2::zeros());
-        inp.weights.push(1.0 / n as f64);
-        inp.measurements
-            .push(world.measurement.measure(&p, &mut rng));
-        inp.alpha.push(1.0 / n as f64);
-    }
+        centre + Enu2::new(rng.gen_range(-1.0..1.0), side + rng.gen_range(-1.0..1.0))
+    });
     let agent = View::north(centre);
     // The reachable grid reduced to the drone's own place: the candidates are the two
     // exits' particles (flown to, the view's long side along the way there: one exit seen)
