@@ -555,7 +555,9 @@ pub struct GuidanceConfig {
     /// of the candidates whose EER is within this share of the range below the best, the plan
     /// keeps to the one nearest its previous waypoint, so the drone flies to one mode of a
     /// spread belief instead of back and forth between them (a departure from the paper's
-    /// argmax; BENCHMARKS "Field scale, parts 26-27"). Tracking, the argmax. Optional; absent,
+    /// argmax; BENCHMARKS "Field scale, parts 26-27"). Once the drone sees its previous
+    /// waypoint it has got there, and the argmax decides again (part 55). Tracking, the
+    /// argmax. Optional; absent,
     /// 0.2; 0 with `centring_share = 0` restores the paper's argmax always (exact ties broken
     /// toward the belief's mean).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -795,7 +795,11 @@ impl EerPlanner {
             p.miss_probability,
             &mut self.scratch,
         );
-        let previous = self.last_waypoint_enu.filter(|_| self.searching);
+        // The commitment is to get the drone to the mode it chose. Once the vehicle sees its
+        // previous waypoint it is there, and the argmax decides again ([`committed_choice`]).
+        let previous = self
+            .last_waypoint_enu
+            .filter(|w| self.searching && !world.footprint.contains(agent, w));
         let mut predicted_mean = Enu2::zeros();
         for (p, w) in self.inputs.predicted.iter().zip(&self.inputs.weights) {
             predicted_mean += *w * p;

@@ -9,7 +9,12 @@
 //! since the belief stopped being local, see the tracker), the plan keeps to the candidate
 //! nearest its previous waypoint among those whose EER is within a share of the EER range
 //! below the best, so the drone flies to one mode unless another is clearly better. A
-//! departure from the paper's eq. 14 (the argmax), documented.
+//! departure from the paper's eq. 14 (the argmax), documented. The commitment lasts until
+//! the drone gets there: once the vehicle's view holds its previous waypoint, the planner
+//! passes none ([`super::EerPlanner::decide`]) and the argmax decides again. Kept to the
+//! end, it chased the refuted mode's fastest hypotheses past a covered junction while the
+//! car drove off the other way (the outdoor closed loop: 5 of 80 seeds lost the car for good;
+//! BENCHMARKS.md "Field scale, part 55").
 //!
 //! Centring otherwise ([`Centring`]): with no previous waypoint to keep to (tracking, the
 //! first plan of a search, or `guidance.search_commitment = 0`), the candidate nearest the

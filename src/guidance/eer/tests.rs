@@ -654,36 +654,47 @@ fn a_search_keeps_to_its_mode_unless_another_is_clearly_better() {
     };
     let mut model = ConstantVelocity::new(c.motion.cv_max_speed_mps, c.filter_dt_s());
     let near = |d: &EerDecision, p: Enu2| (d.waypoint_enu - p).norm() < 60.0;
-    let mut plan = |planner: &mut EerPlanner, pf: &mut ParticleFilter, shares: (f64, f64)| {
-        assert!(pf.set_weights(&weigh(shares.0, shares.1)));
-        planner
-            .plan(
-                pf,
-                &mut model,
-                &View::north(agent),
-                &HeadingRule::north(),
-                &world,
-                &mut rng,
-            )
-            .unwrap()
-    };
+    let mut plan_from =
+        |planner: &mut EerPlanner, pf: &mut ParticleFilter, shares: (f64, f64), agent: Enu2| {
+            assert!(pf.set_weights(&weigh(shares.0, shares.1)));
+            planner
+                .plan(
+                    pf,
+                    &mut model,
+                    &View::north(agent),
+                    &HeadingRule::north(),
+                    &world,
+                    &mut rng,
+                )
+                .unwrap()
+        };
 
     let mut searching = EerPlanner::new(params.clone());
     searching.set_searching(true);
-    let d = plan(&mut searching, &mut pf, (0.5, 0.1));
+    let d = plan_from(&mut searching, &mut pf, (0.5, 0.1), agent);
     assert!(near(&d, east), "{}", d.waypoint_enu);
     // North now holds a little more: the search stays east.
-    let d = plan(&mut searching, &mut pf, (0.28, 0.32));
+    let d = plan_from(&mut searching, &mut pf, (0.28, 0.32), agent);
     assert!(near(&d, east), "{}", d.waypoint_enu);
     // North clearly better: the search goes there.
-    let d = plan(&mut searching, &mut pf, (0.1, 0.5));
+    let d = plan_from(&mut searching, &mut pf, (0.1, 0.5), agent);
+    assert!(near(&d, north), "{}", d.waypoint_enu);
+
+    // Arrived over the east mode (its previous waypoint in view): the commitment has got
+    // the drone there, and the argmax decides again: north, a little heavier.
+    let mut arrived = EerPlanner::new(params.clone());
+    arrived.set_searching(true);
+    let d = plan_from(&mut arrived, &mut pf, (0.5, 0.1), agent);
+    assert!(near(&d, east), "{}", d.waypoint_enu);
+    let over_east = d.waypoint_enu;
+    let d = plan_from(&mut arrived, &mut pf, (0.28, 0.32), over_east);
     assert!(near(&d, north), "{}", d.waypoint_enu);
 
     let mut seen = EerPlanner::new(params);
     seen.set_searching(false);
-    let d = plan(&mut seen, &mut pf, (0.5, 0.1));
+    let d = plan_from(&mut seen, &mut pf, (0.5, 0.1), agent);
     assert!(near(&d, east), "{}", d.waypoint_enu);
-    let d = plan(&mut seen, &mut pf, (0.1, 0.5));
+    let d = plan_from(&mut seen, &mut pf, (0.1, 0.5), agent);
     assert!(near(&d, north), "{}", d.waypoint_enu);
 }
 
