@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use infotrack::autopilot::link::{LinkConfig, VehicleLink};
+use infotrack::autopilot::link::{LinkConfig, LinkError, VehicleLink};
 use infotrack::autopilot::modes::{Flavor, Mode};
 use infotrack::autopilot::params_file::ParamType;
 use infotrack::frames::PositionEnu;
@@ -18,10 +18,19 @@ async fn setup(
     loss_percent: f64,
     link_sysid: u8,
 ) -> (infotrack::mock::server::MockHandle, VehicleLink) {
+    setup_with(MockConfig::new(flavor), loss_percent, link_sysid).await
+}
+
+async fn setup_with(
+    mock_cfg: MockConfig,
+    loss_percent: f64,
+    link_sysid: u8,
+) -> (infotrack::mock::server::MockHandle, VehicleLink) {
+    let flavor = mock_cfg.flavor;
     let port = free_udp_port();
     let mock = spawn(
         &format!("udpin:127.0.0.1:{port}"),
-        MockConfig::new(flavor),
+        mock_cfg,
         Faults {
             loss_percent,
             seed: 7,
@@ -83,6 +92,55 @@ async fn px4_offboard_flight_failsafe_and_hold() {
     .unwrap();
     link.hold().await.unwrap();
     assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
+}
+
+/// A mock whose failsafe holds the mode for `locked_s` after boot.
+fn mode_locked_for(flavor: Flavor, locked_s: f64) -> MockConfig {
+    let mut cfg = MockConfig::new(flavor);
+    cfg.mode_locked_until_s = locked_s;
+    cfg
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_takeoff_waits_out_a_mode_change_rejected_as_temporary() {
+    // PX4 SIH answered DO_SET_MODE TEMPORARILY_REJECTED while a failsafe held: the
+    // takeoff tries again until the failsafe clears, for both flavours.
+    for flavor in [Flavor::Px4, Flavor::ArduPilot] {
+        let (mock, link) = setup_with(mode_locked_for(flavor, 4.0), 0.0, 1).await;
+        link.request_telemetry().await.unwrap();
+        link.take_off(5.0, Duration::from_secs(20))
+            .await
+            .unwrap_or_else(|e| panic!("{flavor}: {e}"));
+        assert!(mock.with(|m| m.armed()), "{flavor}");
+        assert_eq!(
+            link.state().mode,
+            Some(Mode::companion_for(flavor)),
+            "{flavor}"
+        );
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mode_change_still_rejected_when_the_time_is_up_names_the_vehicles_reason() {
+    let (mock, link) = setup_with(mode_locked_for(Flavor::Px4, 1e6), 0.0, 1).await;
+    link.request_telemetry().await.unwrap();
+    let e = link
+        .take_off(5.0, Duration::from_secs(3))
+        .await
+        .expect_err("the failsafe never clears");
+    let said = e.to_string();
+    assert!(
+        matches!(
+            e,
+            LinkError::ModeRejected {
+                mode: Mode::Offboard,
+                ..
+            }
+        ),
+        "{said}"
+    );
+    assert!(said.contains("Failsafe: mode change rejected"), "{said}");
+    assert!(!mock.with(|m| m.armed()));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

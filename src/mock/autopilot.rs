@@ -61,6 +61,11 @@ pub struct MockConfig {
     /// what the tests of the protocol and the modes need) or [`Response::sitl`] (as the
     /// flavour's SITL build measured: `infotrack mock`'s default).
     pub response: Response,
+    /// Seconds after boot during which a failsafe holds the vehicle's mode: every
+    /// MAV_CMD_DO_SET_MODE is answered TEMPORARILY_REJECTED, with a STATUSTEXT saying why.
+    /// PX4 SIH did so while its "Failsafe: blind land" held (a sensor that had not
+    /// reported yet). 0: no such failsafe.
+    pub mode_locked_until_s: f64,
     /// Seed of the loop's wander.
     pub seed: u64,
 }
@@ -94,6 +99,7 @@ impl MockConfig {
             rc_throttle_centred: false,
             hover_wander_m: 0.0,
             response: Response::IDEAL,
+            mode_locked_until_s: 0.0,
             seed: 1,
         }
     }
@@ -328,6 +334,11 @@ impl MockAutopilot {
         self.started_up = true;
         self.set_mode_internal(Mode::Stabilized);
         out.push(self.statustext(MavSeverity::MAV_SEVERITY_INFO, "ArduPilot Ready"));
+    }
+
+    /// A failsafe still holds the mode ([`MockConfig::mode_locked_until_s`]).
+    fn mode_locked(&self) -> bool {
+        self.now_s - self.boot_s < self.cfg.mode_locked_until_s
     }
 
     fn estimator_ready(&self) -> bool {

@@ -64,12 +64,7 @@ impl VehicleLink {
         mode: Option<Mode>,
         timeout: Duration,
     ) -> Result<(), LinkError> {
-        let until = Instant::now() + timeout;
-        // One subscription for the whole wait: the vehicle's reason may come just before or
-        // just after its COMMAND_ACK (the mock sends it after; the firmwares queue it).
-        let mut texts = self.events();
-        let mut said: Option<String> = None;
-        loop {
+        let attempt = || async move {
             if let Some(m) = mode {
                 if self.state().mode != Some(m) {
                     if let Err(e) = self.set_mode(m).await {
@@ -77,9 +72,66 @@ impl VehicleLink {
                     }
                 }
             }
-            let refusal = match self.arm().await {
-                Ok(()) => return Ok(()),
-                Err(LinkError::Refused { result, .. }) => format!("{result:?}"),
+            self.arm().await
+        };
+        self.retry_refusals("arm", timeout, attempt, |_| true)
+            .await?
+            .map_err(|reason| LinkError::NotReadyToArm {
+                reason,
+                seconds: timeout.as_secs_f64(),
+            })
+    }
+
+    /// [`Self::set_mode`], retried while the vehicle answers TEMPORARILY_REJECTED (MAVLink's
+    /// "try again later") until `timeout`: PX4 SIH refused OFFBOARD so while its "Failsafe:
+    /// blind land" held, and older PX4 releases refuse it until setpoints stream. Any
+    /// other refusal is final at once; the error carries the vehicle's last reason.
+    pub async fn set_mode_when_ready(
+        &self,
+        mode: Mode,
+        timeout: Duration,
+    ) -> Result<(), LinkError> {
+        let temporary = |r: MavResult| r == MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
+        self.retry_refusals(
+            &format!("enter {mode}"),
+            timeout,
+            || self.set_mode(mode),
+            temporary,
+        )
+        .await?
+        .map_err(|reason| LinkError::ModeRejected {
+            mode,
+            reason,
+            seconds: timeout.as_secs_f64(),
+        })
+    }
+
+    /// Runs `attempt` until it succeeds, again every 2 s while the vehicle refuses with a
+    /// result `retryable` admits, until `timeout`. `Ok(Err(reason))`: still refused when
+    /// the time was up, with the vehicle's last STATUSTEXT (else its COMMAND_ACK result).
+    /// Any other error, or a refusal not retryable, returns at once.
+    async fn retry_refusals<F, Fut>(
+        &self,
+        what: &str,
+        timeout: Duration,
+        mut attempt: F,
+        retryable: impl Fn(MavResult) -> bool,
+    ) -> Result<Result<(), String>, LinkError>
+    where
+        F: FnMut() -> Fut,
+        Fut: std::future::Future<Output = Result<(), LinkError>>,
+    {
+        let until = Instant::now() + timeout;
+        // One subscription for the whole wait: the vehicle's reason may come just before or
+        // just after its COMMAND_ACK (the mock sends it after; the firmwares queue it).
+        let mut texts = self.events();
+        let mut said: Option<String> = None;
+        loop {
+            let refusal = match attempt().await {
+                Ok(()) => return Ok(Ok(())),
+                Err(LinkError::Refused { result, .. }) if retryable(result) => {
+                    format!("{result:?}")
+                }
                 Err(e) => return Err(e),
             };
             // Time for a STATUSTEXT that follows the ACK.
@@ -90,12 +142,9 @@ impl VehicleLink {
                 .saturating_duration_since(Instant::now())
                 .as_secs_f64();
             if left <= 0.0 {
-                return Err(LinkError::NotReadyToArm {
-                    reason,
-                    seconds: timeout.as_secs_f64(),
-                });
+                return Ok(Err(reason));
             }
-            tracing::warn!("the vehicle refuses to arm: {reason}; retrying ({left:.0} s left)");
+            tracing::warn!("the vehicle refuses to {what}: {reason}; retrying ({left:.0} s left)");
             tokio::time::sleep(Duration::from_secs(2).min(Duration::from_secs_f64(left))).await;
             // A new attempt: only what the vehicle says from now on counts as its reason.
             latest_text(&mut texts, &mut None);
@@ -161,11 +210,11 @@ impl VehicleLink {
             Flavor::Px4 => {
                 self.set_setpoint(above, self.heading_enu_rad())?;
                 tokio::time::sleep(Duration::from_millis(1200)).await;
-                self.set_mode(Mode::Offboard).await?;
+                self.set_mode_when_ready(Mode::Offboard, timeout).await?;
                 self.arm_when_ready(timeout).await?;
             }
             Flavor::ArduPilot => {
-                self.set_mode(Mode::Guided).await?;
+                self.set_mode_when_ready(Mode::Guided, timeout).await?;
                 self.arm_in_mode_when_ready(Some(Mode::Guided), timeout)
                     .await?;
                 if self.state().mode != Some(Mode::Guided) {

@@ -89,6 +89,16 @@ pub enum LinkError {
         /// How long arming was retried, s.
         seconds: f64,
     },
+    /// The vehicle kept refusing a mode change as temporary until the time was up.
+    #[error("MAV_CMD_DO_SET_MODE to {mode} refused by the vehicle for {seconds:.0} s; its last reason: {reason}")]
+    ModeRejected {
+        /// The mode asked for.
+        mode: Mode,
+        /// What the vehicle said last (its STATUSTEXT), or its COMMAND_ACK result.
+        reason: String,
+        /// How long the change was retried, s.
+        seconds: f64,
+    },
     /// The firmware has no such mode.
     #[error("{flavor} has no mode {mode:?}")]
     NoSuchMode {

@@ -65,6 +65,12 @@ impl MockAutopilot {
                 let mode = Mode::from_do_set_mode(self.cfg.flavor, c.param2, c.param3);
                 if c.param1 as u32 & 1 == 0 || matches!(mode, Mode::Other(_)) {
                     MAV_RESULT_UNSUPPORTED
+                } else if self.mode_locked() {
+                    out.push(self.statustext(
+                        MavSeverity::MAV_SEVERITY_CRITICAL,
+                        "Failsafe: mode change rejected",
+                    ));
+                    MAV_RESULT_TEMPORARILY_REJECTED
                 } else if mode == Mode::Offboard && !self.setpoints_fresh() {
                     out.push(self.statustext(
                         MavSeverity::MAV_SEVERITY_WARNING,

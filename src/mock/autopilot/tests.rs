@@ -113,6 +113,26 @@ fn arming_is_refused_until_the_estimator_is_ready() {
 }
 
 #[test]
+fn a_failsafe_that_holds_the_mode_rejects_changes_temporarily_until_it_clears() {
+    let mut cfg = MockConfig::new(Flavor::Px4);
+    cfg.mode_locked_until_s = 4.0;
+    let mut m = MockAutopilot::new(cfg, 0.0);
+    let before = m.mode();
+    let t = stream(&mut m, 0.0, 1.5, Some([0.0, 0.0, -5.0]));
+    assert_eq!(
+        set_mode(&mut m, t, Mode::Offboard),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED
+    );
+    assert_eq!(m.mode(), before);
+    let t = stream(&mut m, t, 4.5, Some([0.0, 0.0, -5.0]));
+    assert_eq!(
+        set_mode(&mut m, t, Mode::Offboard),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(m.mode(), Mode::Offboard);
+}
+
+#[test]
 fn ardupilot_resets_a_mode_set_during_its_startup_and_refuses_to_arm_before() {
     let mut cfg = MockConfig::new(Flavor::ArduPilot);
     cfg.startup_s = 2.2;
