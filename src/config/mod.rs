@@ -549,9 +549,8 @@ pub struct GuidanceConfig {
     /// part 16").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub intercept_within_s: Option<f64>,
-    /// Commitment while searching (before the first sighting, and whenever the target has
-    /// been unseen for longer than the plan's horizon or, if longer, the time it takes at
-    /// its last seen speed to cross the camera's view), a share of the EER range in [0, 1]:
+    /// Commitment while searching (before the first sighting; after a loss, since part 56,
+    /// the argmax decides), a share of the EER range in [0, 1]:
     /// of the candidates whose EER is within this share of the range below the best, the plan
     /// keeps to the one nearest its previous waypoint, so the drone flies to one mode of a
     /// spread belief instead of back and forth between them (a departure from the paper's

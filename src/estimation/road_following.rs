@@ -56,7 +56,7 @@ pub fn straight_track_on_roads<R: Rng + ?Sized>(
 /// on one of the roads it can take within that step, the turns drawn by their graph
 /// probabilities, the turn back included (the road network is a Markov chain over nodes, so
 /// a car at a node with a two-way street turns back along it with that edge's probability,
-/// as the simulated car does), keeping its speed. A track whose step runs off the end of a
+/// as the simulated car does), keeping its speed (a turn back slows it: [`slow_a_turn_back`]). A track whose step runs off the end of a
 /// road with no way on but back (a dead end, or a U-turn edge at it) turns back along it. A
 /// track whose step stays on its road (one piece ahead and no turn back in reach, or two with
 /// the straight-on step within `on_road_m` of a road: a bend it follows anyway) is left
@@ -70,6 +70,56 @@ pub fn straight_track_on_roads<R: Rng + ?Sized>(
 /// belief now splits between its exits, and EER's search chooses between them worse than the
 /// re-spread corrected the old, wrong belief (part 43).
 pub fn reroute_track<R: Rng + ?Sized>(
+    histories: &mut Histories,
+    i: usize,
+    world: &World,
+    dt_s: f64,
+    on_road_m: f64,
+    rng: &mut R,
+) -> bool {
+    let before = track_velocity(histories, i, dt_s);
+    let rerouted = put_on_the_road_ahead(histories, i, world, dt_s, on_road_m, rng);
+    if rerouted {
+        slow_a_turn_back(histories, i, &before, dt_s, rng);
+    }
+    rerouted
+}
+
+/// The slowest share of its speed a track keeps when it turns back ([`slow_a_turn_back`]).
+pub const TURN_BACK_MIN_SPEED_SHARE: f64 = 0.4;
+
+/// A track that [`reroute_track`] turned back (its velocity now against `before`) drives on
+/// at a speed drawn from [`TURN_BACK_MIN_SPEED_SHARE`] to 1 of its own: no car turns round at
+/// cruise speed (the simulated car stops to turn on the spot). Kept at full speed, the
+/// turned-back hypotheses came out of a covered junction seconds before the car and were seen
+/// absent there, and the belief gave the car's way up (field-eight's covered crossing;
+/// BENCHMARKS.md "Field scale, part 56"). Its newest position stays; its history is made
+/// straight at the new speed.
+fn slow_a_turn_back<R: Rng + ?Sized>(
+    histories: &mut Histories,
+    i: usize,
+    before: &Enu2,
+    dt_s: f64,
+    rng: &mut R,
+) {
+    let after = track_velocity(histories, i, dt_s);
+    if after.dot(before) >= 0.0 {
+        return;
+    }
+    let share = rng.gen_range(TURN_BACK_MIN_SPEED_SHARE..=1.0);
+    let p = histories.newest(i);
+    let k = histories.k_in();
+    let v_step = after * share * dt_s;
+    let tr = histories.track_mut(i);
+    for t in 0..k {
+        let q = p - v_step * (k - 1 - t) as f64;
+        tr[2 * t] = q.x;
+        tr[2 * t + 1] = q.y;
+    }
+}
+
+/// [`reroute_track`] before a turn back is slowed.
+fn put_on_the_road_ahead<R: Rng + ?Sized>(
     histories: &mut Histories,
     i: usize,
     world: &World,

@@ -620,12 +620,17 @@ impl EerPlanner {
         self.rollout_on_roads_m = on_road_m;
     }
 
-    /// Whether the agent is searching: the target not yet seen, or unseen long enough that
-    /// the belief may have split (the tracker decides). The plan then keeps to its previous
+    /// Whether the agent is searching (the tracker decides: until the target is first seen).
+    /// The plan then keeps to its previous
     /// waypoint's mode unless another is clearly better ([`committed_choice`],
     /// `search_commitment`); otherwise the paper's argmax.
     pub fn set_searching(&mut self, on: bool) {
         self.searching = on;
+    }
+
+    /// Whether the agent is searching ([`Self::set_searching`]).
+    pub fn is_searching(&self) -> bool {
+        self.searching
     }
 
     /// Whether the plan weighs the hypotheses by how fast they drive away from the agent

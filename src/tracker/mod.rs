@@ -19,7 +19,7 @@ pub mod schedule;
 mod belief;
 mod plan;
 #[cfg(test)]
-use plan::{approach_velocity, is_searching};
+use plan::approach_velocity;
 
 pub use clock::{Clock, FrozenClock, MonotonicClock};
 pub use estimator::{Estimator, EstimatorKind, UnknownEstimator};

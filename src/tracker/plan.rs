@@ -79,7 +79,7 @@ impl Tracker {
             }
         }
         Ok(match self.params.guidance {
-            GuidanceKind::Eer => Some(self.plan_eer(t_s, vehicle)?),
+            GuidanceKind::Eer => Some(self.plan_eer(vehicle)?),
             GuidanceKind::Pfwm => Some((self.estimator.mean(), self.confident_velocity())),
             GuidanceKind::Kf => match &self.side_kf {
                 Some(k) => Some((k.mean(), k.velocity())),
@@ -105,30 +105,18 @@ impl Tracker {
         }
     }
 
-    /// How long after the last measurement the belief stays local (the one that measurement
-    /// left): the plan's horizon, or, if longer, the time the target, at the speed it was last
-    /// seen at, takes to cross the camera's view along its shorter side. Until then the target
-    /// may still be in or by the view it was lost from and EER's argmax follows it; after it,
-    /// the belief may have split (an occluded junction) and EER keeps to one mode. With one
-    /// horizon alone, the lab's closed loop lost 2.5 points of frames with the tag (seeds
-    /// 1-16: a slow target hidden for seconds under a 1 m square, the argmax still the right
-    /// move); with the crossing time it is level (BENCHMARKS.md "Field scale, part 27").
-    pub(super) fn local_for_s(&self, horizon_s: f64) -> f64 {
-        let fp = self.world.footprint;
-        let view_m = 2.0 * fp.half_width_m.min(fp.half_height_m);
-        horizon_s.max(view_m / self.last_seen_speed_mps.max(1e-9))
-    }
-
     /// EER's waypoint is where to be at the end of the horizon; with the target's velocity
     /// (when the belief is concentrated) the setpoint moves so as to get there then, riding
     /// along with the target instead of trailing it.
-    fn plan_eer(&mut self, t_s: f64, vehicle: &View) -> Result<(Enu2, Enu2), TrackerError> {
+    fn plan_eer(&mut self, vehicle: &View) -> Result<(Enu2, Enu2), TrackerError> {
         let vehicle_enu = &vehicle.centre_enu;
         let over_target_velocity_enu = self.confident_velocity();
         let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
-        // Searching: EER then keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27").
-        let searching = self.respreads_in_spell > 0
-            || is_searching(self.last_measurement, t_s, self.local_for_s(horizon_s));
+        // Searching, EER keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27"): until
+        // the first sighting only. Once the target has been seen, the argmax decides even
+        // through a loss; kept after a loss too (parts 27-55), the commitment held the drone
+        // on a refuted branch past covered junctions (part 56).
+        let searching = self.last_measurement.is_none();
         let Estimator::Particle { pf, model } = &mut self.estimator else {
             // Refused at construction by check_combination.
             return Err(TrackerError::Incompatible {
@@ -221,16 +209,6 @@ impl Tracker {
 /// flown ([`Tracker::along_the_roads`]): a quarter, the one value measured (BENCHMARKS.md
 /// "Field scale, part 50"). Beyond it the roads wind away from where the drone must go.
 pub(super) const ROAD_PATH_DETOUR: f64 = 1.25;
-
-/// Whether EER is searching at `t_s`: the target never seen, or unseen for longer than
-/// `local_s` ([`Tracker::local_for_s`]), so that the belief may have split where it went out
-/// of view (an occluded junction, a covered crossing). Tracking through a loss with the
-/// paper's argmax, the plan flipped between a covered crossing's two exits from one plan to
-/// the next and the drone saw neither (field-eight: 39 % of the time in view; BENCHMARKS.md
-/// "Field scale, part 27").
-pub(super) fn is_searching(last_measurement: Option<(f64, Enu2)>, t_s: f64, local_s: f64) -> bool {
-    last_measurement.map_or(true, |(seen_s, _)| t_s - seen_s > local_s)
-}
 
 /// The planned motion toward a waypoint beyond every candidate of the reachable region (a
 /// square's corners lie at sqrt(2) x reach, a disc's rim at reach; beyond them a waypoint is

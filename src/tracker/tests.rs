@@ -700,34 +700,35 @@ fn before_the_first_sighting_the_re_spread_from_the_cue_keeps_out_what_was_watch
 }
 
 #[test]
-fn eer_searches_until_the_first_sighting_and_whenever_unseen_longer_than_the_belief_stays_local() {
-    let local_s = 2.0;
-    let seen_at = |t: f64| Some((t, Enu2::new(10.0, 20.0)));
-    assert!(is_searching(None, 0.0, local_s), "never seen");
-    assert!(is_searching(None, 100.0, local_s), "never seen");
-    assert!(!is_searching(seen_at(50.0), 50.0, local_s), "seen now");
-    assert!(!is_searching(seen_at(50.0), 52.0, local_s), "still local");
-    assert!(
-        is_searching(seen_at(50.0), 52.1, local_s),
-        "out of view past it"
-    );
-}
-
-#[test]
-fn the_belief_stays_local_until_the_target_could_have_crossed_the_view() {
-    let c = Config::default_lab();
+fn eer_searches_until_the_first_sighting_and_not_after_a_loss() {
+    // Kept after a loss too (parts 27-55), the commitment held the drone on a refuted
+    // branch past covered junctions (BENCHMARKS.md "Field scale, part 56").
+    let c = field_grid();
+    let dt = 1.0 / c.timing.filter_hz;
     let mut t = tracker(&c, GuidanceKind::Eer, false);
-    let fp = t.world.footprint;
-    let view_m = 2.0 * fp.half_width_m.min(fp.half_height_m);
-    // A slow target: the crossing time, longer than the horizon.
-    t.last_seen_speed_mps = 0.1 * view_m;
-    assert!((t.local_for_s(2.0) - 10.0).abs() < 1e-9);
-    // A fast one crosses within the horizon: the horizon.
-    t.last_seen_speed_mps = 10.0 * view_m;
-    assert!((t.local_for_s(2.0) - 2.0).abs() < 1e-12);
-    // Seen standing: local until the re-spread.
-    t.last_seen_speed_mps = 0.0;
-    assert!(t.local_for_s(2.0) > 1e6);
+    let elsewhere = Enu2::new(1100.0, -150.0);
+    let mut t_s = 0.0;
+    while t_s < 3.0 {
+        t_s += dt;
+        frame(&mut t, t_s, elsewhere, None);
+    }
+    let plan = |t: &mut Tracker, t_s: f64, at: Enu2| {
+        t.decide(t_s, &View::north(at), None, &FrozenClock).unwrap();
+    };
+    plan(&mut t, t_s, elsewhere);
+    assert!(t.planner.is_searching(), "never seen: searching");
+    let mut t_s = seen_driving_east(&mut t, dt, 12.0, 12.0);
+    plan(&mut t, t_s, Enu2::new(468.0, 0.0));
+    assert!(!t.planner.is_searching(), "seen: tracking");
+    // Unseen past the re-spread: the argmax still decides.
+    let lost_s = t_s;
+    while t_s < lost_s + 2.0 * c.daemon.target_lost_after_s {
+        t_s += dt;
+        frame(&mut t, t_s, elsewhere, None);
+    }
+    plan(&mut t, t_s, elsewhere);
+    assert!(t.respreads_in_spell > 0);
+    assert!(!t.planner.is_searching(), "lost: the argmax decides");
 }
 
 #[test]
