@@ -40,15 +40,19 @@ pub fn straight_track_on_roads<R: Rng + ?Sized>(
         return false;
     };
     let speed = rng.gen_range(speeds_mps);
+    straighten(histories, i, &p, &(dir * speed * dt_s));
+    true
+}
+
+/// Track `i` becomes straight, ending at `newest` after steps of `v_step` (m per step).
+fn straighten(histories: &mut Histories, i: usize, newest: &Enu2, v_step: &Enu2) {
     let k = histories.k_in();
-    let v_step = dir * speed * dt_s;
     let tr = histories.track_mut(i);
     for t in 0..k {
-        let q = p - v_step * (k - 1 - t) as f64;
+        let q = newest - v_step * (k - 1 - t) as f64;
         tr[2 * t] = q.x;
         tr[2 * t + 1] = q.y;
     }
-    true
 }
 
 /// Re-routes track `i` if its next straight step (at its track velocity, over `dt_s`) leaves
@@ -107,15 +111,8 @@ fn slow_a_turn_back<R: Rng + ?Sized>(
         return;
     }
     let share = rng.gen_range(TURN_BACK_MIN_SPEED_SHARE..=1.0);
-    let p = histories.newest(i);
-    let k = histories.k_in();
-    let v_step = after * share * dt_s;
-    let tr = histories.track_mut(i);
-    for t in 0..k {
-        let q = p - v_step * (k - 1 - t) as f64;
-        tr[2 * t] = q.x;
-        tr[2 * t + 1] = q.y;
-    }
+    let newest = histories.newest(i);
+    straighten(histories, i, &newest, &(after * share * dt_s));
 }
 
 /// [`reroute_track`] before a turn back is slowed.
