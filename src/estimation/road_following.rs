@@ -64,7 +64,8 @@ fn straighten(histories: &mut Histories, i: usize, newest: &Enu2, v_step: &Enu2)
 /// road with no way on but back (a dead end, or a U-turn edge at it) turns back along it. A
 /// track whose step stays on its road (one piece ahead and no turn back in reach, or two with
 /// the straight-on step within `on_road_m` of a road: a bend it follows anyway) is left
-/// alone. True when the track was re-routed.
+/// alone; a track off every road whose step stays off them is put on the one piece ahead.
+/// True when the track was re-routed.
 ///
 /// Before session 46 the turn back was never drawn where another way on was in reach: the
 /// belief went on while the car turned back, and was lost for good where it did (random-11,
@@ -88,6 +89,16 @@ pub fn reroute_track<R: Rng + ?Sized>(
     }
     rerouted
 }
+
+/// How many of [`reroute_track`]'s `on_road_m` a track must be off every road, now and after
+/// its step, to be put back on the one piece of road ahead: 6, i.e. three road sigmas where
+/// `on_road_m` is half a sigma (the filter and EER's rollout), where the road constraint has
+/// all but ruled the track out (a weight of exp(-4.5) = 0.011) and the simulated car seldom
+/// is (its 99th percentile off the centre line is 10.5-13.2 m against 11.1 m). With 1 (put
+/// back from half a sigma) the belief lost its spread across the road: outdoors the tracking
+/// error rose from 7.5 to 10.6 m and, flying to the true car, the estimate's from 3.44 to
+/// 4.20 m (BENCHMARKS.md "Field scale, part 59").
+pub const STRAY_ON_ROAD_TOLERANCES: f64 = 6.0;
 
 /// The slowest share of its speed a track keeps when it turns back ([`slow_a_turn_back`]).
 pub const TURN_BACK_MIN_SPEED_SHARE: f64 = 0.4;
@@ -150,7 +161,8 @@ fn put_on_the_road_ahead<R: Rng + ?Sized>(
         let turns_back = in_reach.reversals(&d);
         d.dot(&v) > 0.0 && turns_back > 0 && turns_back < all
     });
-    let step_on_road = world.road.distance_to_roads(&(p + v * dt_s)) <= on_road_m;
+    let step_off_road_m = world.road.distance_to_roads(&(p + v * dt_s));
+    let step_on_road = step_off_road_m <= on_road_m;
     if pieces == 1 && !step_on_road {
         // A dead end: the track is on its road, the road ends within the step and the only
         // way on is back. Carried straight on, the belief ran off the road's end while the
@@ -168,7 +180,16 @@ fn put_on_the_road_ahead<R: Rng + ?Sized>(
     if turn_back_in_reach {
         return straight_track_on_roads(histories, i, &in_reach, speed..=speed, dt_s, rng);
     }
-    let follows_its_road = pieces < 2 || (pieces == 2 && step_on_road);
+    // A track farther than STRAY_ON_ROAD_TOLERANCES tolerances off every road, whose next
+    // step stays as far off, with one piece of road within the step ahead, is re-routed onto
+    // that piece rather than counted as following its road: carried straight on it ran off
+    // across the map, and EER's rollout, which has no road constraint to weigh it down,
+    // judged the drone's candidates by hypotheses where no car can be (30-48 % of a 20 s
+    // rollout near random-4's node 6; BENCHMARKS.md "Field scale, parts 58 and 59").
+    let stray_m = STRAY_ON_ROAD_TOLERANCES * on_road_m;
+    let strays_off_the_roads =
+        pieces == 1 && step_off_road_m > stray_m && world.road.distance_to_roads(&p) > stray_m;
+    let follows_its_road = (pieces < 2 && !strays_off_the_roads) || (pieces == 2 && step_on_road);
     !follows_its_road && {
         let ahead = in_reach.without_reversals(&v);
         straight_track_on_roads(histories, i, &ahead, speed..=speed, dt_s, rng)

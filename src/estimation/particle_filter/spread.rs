@@ -230,7 +230,8 @@ impl ParticleFilter {
     /// slowed from 14 to 5-8 m/s at corners and slow clusters sat at the roads' ends;
     /// BENCHMARKS.md "Field scale, part 21"). A particle whose step stays on its road (one
     /// piece ahead, or two with the straight-on step within half a road sigma of a road:
-    /// a bend it follows anyway) is left alone. Nothing without roads.
+    /// a bend it follows anyway) is left alone; one more than three road sigmas off every road
+    /// with one piece ahead is put on that piece. Nothing without roads.
     pub fn reroute_at_junctions<R: Rng + ?Sized>(&mut self, world: &World, rng: &mut R) {
         let dt = self.params.dt_s;
         let on_road_m = 0.5 * self.params.road_sigma_m.unwrap_or(0.0);

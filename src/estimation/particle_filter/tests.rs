@@ -759,6 +759,57 @@ fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
 }
 
 #[test]
+fn particles_off_the_road_beside_one_piece_are_put_back_on_it() {
+    // Outdoor world: every particle 20 m north of the y = 0 road mid-edge (x = 300, far from
+    // any junction), driving east at 10 m/s. The one piece of road within its step is the
+    // road's own: each is put on it, east at its speed, keeping its weight. Before session
+    // 61 such a track counted as following its road and ran on 20 m off it (BENCHMARKS.md
+    // "Field scale, parts 58 and 59").
+    let c = outdoor();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(9);
+    let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
+    let (n, k, dt) = (pf.weights().len(), c.filter.history_len, c.filter_dt_s());
+    let mut off = tracks_along_y0(n, k, dt, 300.0, |_| 10.0);
+    for i in 0..n {
+        let tr = off.track_mut(i);
+        (0..k).for_each(|t| tr[2 * t + 1] = 20.0);
+    }
+    pf.histories = off;
+    let weights_before = pf.weights().to_vec();
+    pf.reroute_at_junctions(&world, &mut rng);
+    for i in 0..n {
+        let p = pf.particle(i);
+        assert!(
+            p.y.abs() < 1e-6 && p.x > 299.0 && p.x < 305.0,
+            "not on the road ahead: {p:?}"
+        );
+        let v = pf.track_velocity(i);
+        assert!(
+            (v - Enu2::new(10.0, 0.0)).norm() < 1e-6,
+            "not east at 10 m/s: {v:?}"
+        );
+    }
+    assert_eq!(pf.weights(), &weights_before[..]);
+    // On the road, or 5 m beside it (within STRAY_ON_ROAD_TOLERANCES: a car off the
+    // centre line), a track is left alone.
+    for beside_m in [0.0, 5.0] {
+        let mut near = tracks_along_y0(n, k, dt, 300.0, |_| 10.0);
+        for i in 0..n {
+            let tr = near.track_mut(i);
+            (0..k).for_each(|t| tr[2 * t + 1] = beside_m);
+        }
+        pf.histories = near;
+        pf.reroute_at_junctions(&world, &mut rng);
+        let at = Enu2::new(300.0, beside_m);
+        assert!(
+            (0..n).all(|i| (pf.particle(i) - at).norm() < 1e-9),
+            "moved from {at:?}"
+        );
+    }
+}
+
+#[test]
 fn particles_at_a_dead_end_turn_back_along_its_road() {
     // field-twin's spur runs north from node 4 (500, 70) to node 6 (500, 500), the warehouse,
     // and the only way on from 6 is back south. Every particle 2 m before the end driving
