@@ -64,7 +64,8 @@ fn straighten(histories: &mut Histories, i: usize, newest: &Enu2, v_step: &Enu2)
 /// road with no way on but back (a dead end, or a U-turn edge at it) turns back along it. A
 /// track whose step stays on its road (one piece ahead and no turn back in reach, or two with
 /// the straight-on step within `on_road_m` of a road: a bend it follows anyway) is left
-/// alone; a track off every road whose step stays off them is put on the one piece ahead.
+/// alone; a track more than [`STRAY_ON_ROAD_TOLERANCES`] times `on_road_m` off every road,
+/// now and after its step, is put on the one piece ahead.
 /// True when the track was re-routed.
 ///
 /// Before session 46 the turn back was never drawn where another way on was in reach: the
@@ -163,7 +164,11 @@ fn put_on_the_road_ahead<R: Rng + ?Sized>(
     });
     let step_off_road_m = world.road.distance_to_roads(&(p + v * dt_s));
     let step_on_road = step_off_road_m <= on_road_m;
-    if pieces == 1 && !step_on_road {
+    // How far the track is off every road, asked once and only where one piece lies ahead
+    // and the step leaves it: the dead end and the stray below both need it, and this runs
+    // per particle per step.
+    let off_road_m = (pieces == 1 && !step_on_road).then(|| world.road.distance_to_roads(&p));
+    if let Some(off_road_m) = off_road_m {
         // A dead end: the track is on its road, the road ends within the step and the only
         // way on is back. Carried straight on, the belief ran off the road's end while the
         // car turned round in it, and EER sent the drone past the end (field-twin's
@@ -171,8 +176,7 @@ fn put_on_the_road_ahead<R: Rng + ?Sized>(
         // at a junction whose other roads lie outside the step, is no dead end: told by the
         // graph, not by the pieces in reach (session 28's first rule turned tracks back at
         // field-ring's corners).
-        let on_road = world.road.distance_to_roads(&p) <= on_road_m;
-        if on_road && world.road.heads_into_a_dead_end(&p, Some(v)) {
+        if off_road_m <= on_road_m && world.road.heads_into_a_dead_end(&p, Some(v)) {
             let back = in_reach.split_reversals(&v).1;
             return straight_track_on_roads(histories, i, &back, speed..=speed, dt_s, rng);
         }
@@ -187,8 +191,7 @@ fn put_on_the_road_ahead<R: Rng + ?Sized>(
     // judged the drone's candidates by hypotheses where no car can be (30-48 % of a 20 s
     // rollout near random-4's node 6; BENCHMARKS.md "Field scale, parts 58 and 59").
     let stray_m = STRAY_ON_ROAD_TOLERANCES * on_road_m;
-    let strays_off_the_roads =
-        pieces == 1 && step_off_road_m > stray_m && world.road.distance_to_roads(&p) > stray_m;
+    let strays_off_the_roads = off_road_m.is_some_and(|d| d > stray_m && step_off_road_m > stray_m);
     let follows_its_road = (pieces < 2 && !strays_off_the_roads) || (pieces == 2 && step_on_road);
     !follows_its_road && {
         let ahead = in_reach.without_reversals(&v);

@@ -770,12 +770,16 @@ fn particles_off_the_road_beside_one_piece_are_put_back_on_it() {
     let mut rng = CoreRng::seed_from_u64(9);
     let mut pf = ParticleFilter::new(c.filter_params(), c.workspace_enu, &mut rng);
     let (n, k, dt) = (pf.weights().len(), c.filter.history_len, c.filter_dt_s());
-    let mut off = tracks_along_y0(n, k, dt, 300.0, |_| 10.0);
-    for i in 0..n {
-        let tr = off.track_mut(i);
-        (0..k).for_each(|t| tr[2 * t + 1] = 20.0);
-    }
-    pf.histories = off;
+    // Tracks along y0, moved `beside_m` north.
+    let beside = |beside_m: f64| {
+        let mut h = tracks_along_y0(n, k, dt, 300.0, |_| 10.0);
+        for i in 0..n {
+            let tr = h.track_mut(i);
+            (0..k).for_each(|t| tr[2 * t + 1] = beside_m);
+        }
+        h
+    };
+    pf.histories = beside(20.0);
     let weights_before = pf.weights().to_vec();
     pf.reroute_at_junctions(&world, &mut rng);
     for i in 0..n {
@@ -794,12 +798,7 @@ fn particles_off_the_road_beside_one_piece_are_put_back_on_it() {
     // On the road, or 5 m beside it (within STRAY_ON_ROAD_TOLERANCES: a car off the
     // centre line), a track is left alone.
     for beside_m in [0.0, 5.0] {
-        let mut near = tracks_along_y0(n, k, dt, 300.0, |_| 10.0);
-        for i in 0..n {
-            let tr = near.track_mut(i);
-            (0..k).for_each(|t| tr[2 * t + 1] = beside_m);
-        }
-        pf.histories = near;
+        pf.histories = beside(beside_m);
         pf.reroute_at_junctions(&world, &mut rng);
         let at = Enu2::new(300.0, beside_m);
         assert!(
