@@ -405,3 +405,114 @@ fn rust_log_is_honoured_and_piped_logs_are_plain_text() {
         .unwrap();
     assert!(!String::from_utf8_lossy(&o.stderr).contains("RUST_LOG"));
 }
+
+/// `scripts/world-batch.py` flies every stand-in through `sim --json` and keeps its figures:
+/// a world's row is what `infotrack sim` run by hand with the same arguments reports, the
+/// table counts the worlds that meet both of issue 12's targets, a measurement compared
+/// with itself differs by nothing, and a missing binary is named.
+#[test]
+fn world_batch_measures_the_stand_ins_as_sim_does() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let script = root.join("scripts/world-batch.py");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("batch");
+    let o = Command::new("python3")
+        .arg(&script)
+        .args(["run", "--bin", env!("CARGO_BIN_EXE_infotrack"), "--out"])
+        .arg(&out)
+        .args(["--set", "stand-ins", "--runs", "2", "--duration", "40"])
+        .args(["--seed", "2"])
+        .output()
+        .unwrap();
+    let table = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        o.status.success(),
+        "{table}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let worlds = summary["worlds"].as_object().unwrap();
+    let stand_ins = std::fs::read_dir(root.join("config"))
+        .unwrap()
+        .filter(|e| {
+            let name = e.as_ref().unwrap().file_name().into_string().unwrap();
+            name.starts_with("field-") && name.ends_with(".toml")
+        })
+        .count();
+    assert!(stand_ins >= 6, "{stand_ins} stand-ins");
+    assert_eq!(worlds.len(), stand_ins, "{table}");
+
+    // field-grid by hand, with the arguments the script passes.
+    let json = dir.path().join("grid.json");
+    let o = infotrack()
+        .arg("sim")
+        .arg("--config")
+        .arg(root.join("config/field-grid.toml"))
+        .args(["--runs", "2", "--duration", "40", "--seed", "2"])
+        .args([
+            "--guidance",
+            "eer",
+            "--motion",
+            "cv",
+            "--quiet",
+            "--threads",
+            "1",
+        ])
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let by_hand: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let row = &by_hand["results"][0];
+    let grid = &worlds["field-grid"];
+    // Something to compare: the car seen in some runs but not in every step.
+    let fov = num(row, &["fov_percent", "mean"]);
+    assert!(fov > 0.0 && fov < 100.0, "field-grid %FOV {fov}");
+    for (key, batch_key) in [
+        ("fov_percent", "fov_percent"),
+        ("tracking_error_m", "tracking_error_m"),
+    ] {
+        assert_eq!(
+            num(row, &[key, "mean"]),
+            num(grid, &[batch_key]),
+            "{key}: sim by hand against the batch"
+        );
+    }
+
+    // The closing line counts the worlds meeting both targets (FOV >= 60 %, tracking <= 20 m).
+    let both = worlds
+        .values()
+        .filter(|w| num(w, &["fov_percent"]) >= 60.0 && num(w, &["tracking_error_m"]) <= 20.0)
+        .count();
+    let expected = format!("both targets on {both} of {stand_ins}");
+    assert!(table.contains(&expected), "{expected} not in\n{table}");
+
+    // Compared with itself: no difference.
+    let o = Command::new("python3")
+        .arg(&script)
+        .arg("compare")
+        .arg(&out)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let compared = String::from_utf8_lossy(&o.stdout);
+    assert!(compared.contains("paired +0.00 points"), "{compared}");
+
+    // A binary that is not there is named.
+    let o = Command::new("python3")
+        .arg(&script)
+        .args(["run", "--bin", "no/such/infotrack", "--out"])
+        .arg(dir.path().join("none"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--bin no/such/infotrack"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
