@@ -134,7 +134,11 @@ def run(args):
             for name, path in worlds
         ]
         for f in concurrent.futures.as_completed(futures):
-            name, row = f.result()
+            try:
+                name, row = f.result()
+            except RuntimeError as e:
+                pool.shutdown(wait=False, cancel_futures=True)
+                sys.exit(str(e))
             rows[name] = row
             print(f"  {name}: {row['fov_percent']:.1f} % / {row['tracking_error_m']:.1f} m", flush=True)
     ordered = {name: rows[name] for name, _ in worlds}
