@@ -16,6 +16,11 @@ fn num(v: &serde_json::Value, path: &[&str]) -> f64 {
         .unwrap_or_else(|| panic!("{path:?} is not a number in {v}"))
 }
 
+/// A JSON file `infotrack` or a script wrote.
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
 /// Runs `infotrack sim` with `args` plus `--json DIR/r.json --out DIR/out`; returns the
 /// process output and the two paths.
 fn sim_to_files(dir: &Path, args: &[&str]) -> (std::process::Output, PathBuf, PathBuf) {
@@ -63,8 +68,7 @@ fn sim_writes_the_json_schema_the_table_and_the_plots() {
         stdout.contains("refused: guidance `eer` cannot run with motion `kf`"),
         "{stdout}"
     );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = read_json(&json);
     let results = v["results"].as_array().unwrap();
     assert_eq!(results.len(), 8);
     for r in results {
@@ -141,8 +145,7 @@ fn frame_causes_reads_the_steps_sim_writes() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let table = String::from_utf8(o.stdout).unwrap();
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = read_json(&json);
     for r in v["results"].as_array().unwrap() {
         let method = format!(
             "{}_{}",
@@ -206,8 +209,7 @@ fn sim_is_deterministic_for_a_seed() {
             .output()
             .unwrap();
         assert!(o.status.success());
-        let v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let v = read_json(&json);
         // Everything but the wall-clock timings.
         v["results"]
             .as_array()
@@ -288,8 +290,7 @@ fn bench_prints_the_table_and_json() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v = read_json(&json);
     for k in [
         ["pf_step_ms", "n500"],
         ["pf_step_ms", "n5000"],
@@ -430,8 +431,7 @@ fn world_batch_measures_the_stand_ins_as_sim_does() {
         "{table}\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary = read_json(&out.join("summary.json"));
     let worlds = summary["worlds"].as_object().unwrap();
     let stand_ins = std::fs::read_dir(root.join("config"))
         .unwrap()
@@ -464,20 +464,16 @@ fn world_batch_measures_the_stand_ins_as_sim_does() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let by_hand: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let by_hand = read_json(&json);
     let row = &by_hand["results"][0];
     let grid = &worlds["field-grid"];
     // Something to compare: the car seen in some runs but not in every step.
     let fov = num(row, &["fov_percent", "mean"]);
     assert!(fov > 0.0 && fov < 100.0, "field-grid %FOV {fov}");
-    for (key, batch_key) in [
-        ("fov_percent", "fov_percent"),
-        ("tracking_error_m", "tracking_error_m"),
-    ] {
+    for key in ["fov_percent", "tracking_error_m"] {
         assert_eq!(
             num(row, &[key, "mean"]),
-            num(grid, &[batch_key]),
+            num(grid, &[key]),
             "{key}: sim by hand against the batch"
         );
     }
