@@ -857,3 +857,50 @@ fn a_far_waypoint_is_flown_to_along_the_roads_unless_they_are_far_or_wind_away()
         );
     }
 }
+
+/// After a loss the far waypoint is flown to along the roads too: field-grid's car seen
+/// driving east to (468, 0), then unseen for 6 s with the camera elsewhere, its belief
+/// (sd ~25 m) past the overpass at node 1 (500, 0), on the east and north roads out of it. A drone 15 m north of the road
+/// at (250, 15), 250 m west, flies the road (y = 0) east at top speed, where straight
+/// toward the node it would keep its 15 m offset and see the road only at its view's edge
+/// (BENCHMARKS.md "Field scale, part 62").
+#[test]
+fn after_a_loss_a_far_waypoint_is_flown_to_along_the_roads() {
+    let c = field_grid();
+    let dt = 1.0 / c.timing.filter_hz;
+    let mut t = tracker(&c, GuidanceKind::Eer, false);
+    let mut t_s = seen_driving_east(&mut t, dt, 12.0, 12.0);
+    let elsewhere = Enu2::new(1100.0, -150.0);
+    let lost_s = t_s;
+    while t_s < lost_s + 6.0 {
+        t_s += dt;
+        frame(&mut t, t_s, elsewhere, None);
+    }
+    assert!(t.estimator.largest_sd_m() > t.world.footprint.quarter_view_m());
+    let drone = Enu2::new(250.0, 15.0);
+    let decision = t
+        .decide(t_s, &View::north(drone), None, &FrozenClock)
+        .unwrap();
+    let Some(Decision::Command {
+        command:
+            Command::GoTo {
+                position_enu,
+                velocity_enu,
+                ..
+            },
+        ..
+    }) = decision
+    else {
+        panic!("{decision:?}");
+    };
+    let reach = t.params.eer.reach_m;
+    assert!(
+        (position_enu - Enu2::new(250.0 + reach, 0.0)).norm() < 1.0,
+        "setpoint {position_enu}"
+    );
+    let horizon_s = t.params.eer.horizon_steps as f64 * t.params.filter.dt_s;
+    assert!(
+        (velocity_enu - Enu2::new(reach / horizon_s, 0.0)).norm() < 1e-6,
+        "{velocity_enu}"
+    );
+}
