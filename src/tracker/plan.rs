@@ -166,10 +166,7 @@ impl Tracker {
         if !far && self.params.heading.kind == ViewHeading::Informed {
             self.planned_view_yaw_enu_rad = Some(d.view_yaw_enu_rad);
         }
-        // Before the first sighting and after a loss alike: flown straight after a loss, the
-        // drone kept the lateral offset it had cutting the corner out of a junction and
-        // passed the car 15-20 m beside its road, outside the view's shorter side
-        // (BENCHMARKS.md "Field scale, part 62").
+        // Before the first sighting and after a loss alike (see `along_the_roads`).
         if far && self.params.cue.is_some() {
             if let Some(along) = self.along_the_roads(vehicle_enu, &d.waypoint_enu, horizon_s) {
                 return Ok(along);
@@ -187,10 +184,13 @@ impl Tracker {
     /// road than the view's shorter side, or when the road path is longer than
     /// [`ROAD_PATH_DETOUR`] x the straight line. Over 40 outdoor closed-loop seeds the car
     /// was in view more often on 29 (sign test p ~ 0.006) and lost for good on none, where
-    /// the straight line lost it on three (BENCHMARKS.md "Field scale, parts 50-52"). Before
-    /// the first sighting only (parts 56-61), the drone flew straight after a loss; flying
-    /// the roads then too gained 1.4 points of FOV over 22 worlds and met the closed loop's
-    /// target on seed 3 (part 62).
+    /// the straight line lost it on three (BENCHMARKS.md "Field scale, parts 50-52"). From
+    /// part 56 to part 61 only before the first sighting: after a loss the drone flew
+    /// straight, kept the offset it had from cutting a junction's corner, and passed the car
+    /// 15-20 m beside its road, outside the view's shorter side. Flying the roads after a
+    /// loss too: +1.4 and +1.6 points of FOV over 22 worlds on two seeds, the closed loop's
+    /// seed 3 25.3 -> 6.7 m, but two closed-loop seeds of 80 lost for good, where the setpoint
+    /// (one reach ahead) overshoots a waypoint near the path's end (part 62).
     pub(super) fn along_the_roads(
         &self,
         vehicle_enu: &Enu2,

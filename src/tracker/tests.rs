@@ -860,10 +860,10 @@ fn a_far_waypoint_is_flown_to_along_the_roads_unless_they_are_far_or_wind_away()
 
 /// After a loss the far waypoint is flown to along the roads too: field-grid's car seen
 /// driving east to (468, 0), then unseen for 6 s with the camera elsewhere, its belief
-/// (sd ~25 m) past the overpass at node 1 (500, 0), on the east and north roads out of it. A drone 15 m north of the road
-/// at (250, 15), 250 m west, flies the road (y = 0) east at top speed, where straight
-/// toward the node it would keep its 15 m offset and see the road only at its view's edge
-/// (BENCHMARKS.md "Field scale, part 62").
+/// (sd ~25 m) past the overpass at node 1 (500, 0), on the east and north roads out of
+/// it. A drone 15 m north of the road at (250, 15), 250 m west, flies the road (y = 0)
+/// east at top speed, where straight toward the node it would keep its 15 m offset and
+/// see the road only at its view's edge (BENCHMARKS.md "Field scale, part 62").
 #[test]
 fn after_a_loss_a_far_waypoint_is_flown_to_along_the_roads() {
     let c = field_grid();
