@@ -18,8 +18,9 @@ BENCHMARKS.md part 42 on two sets of worlds:
 --json ...` on every world, `--jobs` at a time (each single-threaded, so a batch's figures do
 not depend on how many run beside it), each on the world's own seed or on `--seed`. It
 writes DIR/summary.json (the figures per world, with each run's) and prints a table: per
-world the mean %FOV and tracking error, then the mean %FOV over the set and on how many
-worlds both targets hold.
+world the mean %FOV and tracking error, how many runs never saw the target and the tracking
+error after the first sighting (the search apart from the tracking; BENCHMARKS.md part 63),
+then the mean %FOV over the set and on how many worlds both targets hold.
 
 `compare` pairs two summaries world by world (a change measured against its base, both run
 with the same seed): the %FOV difference's mean and paired t statistic, and the worlds on
@@ -103,13 +104,33 @@ def fly(binary, name, config, json_path, args):
     )
     if row is None:
         raise RuntimeError(f"{name}: no {args.guidance}/{args.motion} row in {json_path}")
-    return name, {
+    summary = {
         "config": str(config),
         "fov_percent": row["fov_percent"]["mean"],
         "tracking_error_m": row["tracking_error_m"]["mean"],
         "per_run_fov_percent": [r["fov_percent"] for r in row["per_run"]],
         "per_run_tracking_error_m": [r["tracking_error_m"] for r in row["per_run"]],
     }
+    # The search apart from the tracking, from binaries that write it (since session 65).
+    if all("first_sighting_s" in r for r in row["per_run"]):
+        summary["per_run_first_sighting_s"] = [r["first_sighting_s"] for r in row["per_run"]]
+        summary["per_run_tracking_error_after_first_sighting_m"] = [
+            r["tracking_error_after_first_sighting_m"] for r in row["per_run"]
+        ]
+    return name, summary
+
+
+def never_seen(row):
+    """Runs that never saw the target; None for a summary from an older binary."""
+    firsts = row.get("per_run_first_sighting_s")
+    return None if firsts is None else sum(f is None for f in firsts)
+
+
+def tracking_after_first_sighting(row):
+    """Mean over the runs that saw the target of their tracking error from then on, m; None
+    when no run saw it or the summary is from an older binary."""
+    after = [e for e in row.get("per_run_tracking_error_after_first_sighting_m") or [] if e is not None]
+    return sum(after) / len(after) if after else None
 
 
 def meets_targets(row):
@@ -157,10 +178,13 @@ def run(args):
 
 
 def print_table(rows):
-    print(f"{'world':14s} {'%FOV':>6s} {'track (m)':>10s}  both targets")
+    print(f"{'world':14s} {'%FOV':>6s} {'track (m)':>10s}  both targets  never seen  after 1st (m)")
     for name, r in rows.items():
         mark = "yes" if meets_targets(r) else "no"
-        print(f"{name:14s} {r['fov_percent']:6.1f} {r['tracking_error_m']:10.1f}  {mark}")
+        print(
+            f"{name:14s} {r['fov_percent']:6.1f} {r['tracking_error_m']:10.1f}  {mark:12s}  "
+            f"{optional(never_seen(r), '{:d}'):>10s}  {optional(tracking_after_first_sighting(r), '{:.1f}'):>13s}"
+        )
     random = {k: r for k, r in rows.items() if k.startswith("random-")}
     stand_ins = {k: r for k, r in rows.items() if not k.startswith("random-")}
     if random and stand_ins:
@@ -169,12 +193,18 @@ def print_table(rows):
     print_set_line("", rows)
 
 
+def optional(value, fmt):
+    return "-" if value is None else fmt.format(value)
+
+
 def print_set_line(label, rows):
     n = len(rows)
     if n:
         mean = sum(r["fov_percent"] for r in rows.values()) / n
         both = sum(meets_targets(r) for r in rows.values())
-        print(f"{label}mean %FOV {mean:.2f} over {n} worlds; both targets on {both} of {n}")
+        never = [never_seen(r) for r in rows.values()]
+        runs = "" if None in never else f"; never seen in {sum(never)} runs"
+        print(f"{label}mean %FOV {mean:.2f} over {n} worlds; both targets on {both} of {n}{runs}")
 
 
 def paired_t(diffs):
@@ -214,9 +244,12 @@ def print_paired_line(label, a, b, names):
     mean_b = sum(b[n]["fov_percent"] for n in names) / len(names)
     both_a = sum(meets_targets(a[n]) for n in names)
     both_b = sum(meets_targets(b[n]) for n in names)
+    never_a = [never_seen(a[n]) for n in names]
+    never_b = [never_seen(b[n]) for n in names]
+    runs = "" if None in never_a + never_b else f"; never seen in {sum(never_a)} -> {sum(never_b)} runs"
     print(
         f"{label}mean %FOV {mean_a:.2f} -> {mean_b:.2f} (paired {mean:+.2f} points, t {t:.2f}); "
-        f"both targets on {both_a} -> {both_b} of {len(names)}"
+        f"both targets on {both_a} -> {both_b} of {len(names)}{runs}"
     )
 
 

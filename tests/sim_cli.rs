@@ -92,6 +92,32 @@ fn sim_writes_the_json_schema_the_table_and_the_plots() {
         }
         assert!(num(r, &["fov_percent", "mean"]) <= 100.0);
         assert!(num(r, &["filter_step_ms", "median"]) >= 0.0);
+        // The search apart from the tracking: never-seen runs are those whose first
+        // sighting is null, and every sighting lies within the run.
+        let per_run = r["per_run"].as_array().unwrap();
+        let never = per_run
+            .iter()
+            .filter(|p| p["first_sighting_s"].is_null())
+            .count();
+        assert_eq!(
+            r["search"]["never_seen_runs"].as_u64(),
+            Some(never as u64),
+            "{g}/{m}"
+        );
+        for p in per_run {
+            if let Some(t) = p["first_sighting_s"].as_f64() {
+                assert!((0.0..=15.0).contains(&t), "{g}/{m}: first sighting {t}");
+                assert!(p["tracking_error_after_first_sighting_m"].as_f64().unwrap() >= 0.0);
+            } else {
+                assert!(p["tracking_error_after_first_sighting_m"].is_null());
+            }
+        }
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.starts_with(&format!("search {g}/{m}:"))),
+            "search line {g}/{m}"
+        );
         assert!(
             stdout
                 .lines()

@@ -64,12 +64,19 @@ pub struct RunSummary {
     pub filter_step_ms: f64,
     /// Median guidance step time, ms.
     pub guidance_step_ms: f64,
+    /// When the target was first measured, s since the start (the search's length); `None`
+    /// when it never was.
+    pub first_sighting_s: Option<f64>,
+    /// Mean tracking error from the first sighting on, m (the tracking apart from the
+    /// search); `None` when the target was never seen.
+    pub tracking_error_after_first_sighting_m: Option<f64>,
 }
 
 impl RunSummary {
     /// From a run's step records and timings.
     pub fn from_steps(steps: &[StepRecord], filter_ms: &[f64], guidance_ms: &[f64]) -> Self {
         let n = steps.len().max(1) as f64;
+        let first = steps.iter().position(|s| s.measurement_enu.is_some());
         Self {
             tracking_error_m: steps.iter().map(|s| s.tracking_error_m()).sum::<f64>() / n,
             estimation_error_m: steps.iter().map(|s| s.estimation_error_m()).sum::<f64>() / n,
@@ -79,6 +86,43 @@ impl RunSummary {
                 / n,
             filter_step_ms: median(filter_ms),
             guidance_step_ms: median(guidance_ms),
+            first_sighting_s: first.map(|k| steps[k].t_s),
+            tracking_error_after_first_sighting_m: first.map(|k| {
+                let after = &steps[k..];
+                after.iter().map(|s| s.tracking_error_m()).sum::<f64>() / after.len() as f64
+            }),
+        }
+    }
+}
+
+/// The search apart from the tracking, over a set of runs: how many never saw the target,
+/// how long the others searched, and how well they tracked once they had seen it. A run
+/// lost for good before its first sighting and one that tracks badly after it have the
+/// same mean tracking error; these tell them apart.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct SearchSummary {
+    /// Runs in which the target was never measured.
+    pub never_seen_runs: usize,
+    /// Median time of the first sighting over the runs that had one, s (NaN, written as
+    /// null, when none had).
+    pub first_sighting_s_median: f64,
+    /// Mean and sd over the runs that saw the target of their mean tracking error from the
+    /// first sighting on, m.
+    pub tracking_error_after_first_sighting_m: MeanSd,
+}
+
+impl SearchSummary {
+    /// Over these runs' summaries.
+    pub fn over(runs: &[RunSummary]) -> Self {
+        let firsts: Vec<f64> = runs.iter().filter_map(|r| r.first_sighting_s).collect();
+        let after: Vec<f64> = runs
+            .iter()
+            .filter_map(|r| r.tracking_error_after_first_sighting_m)
+            .collect();
+        Self {
+            never_seen_runs: runs.len() - firsts.len(),
+            first_sighting_s_median: median(&firsts),
+            tracking_error_after_first_sighting_m: mean_sd(&after),
         }
     }
 }
@@ -121,5 +165,43 @@ mod tests {
         assert!((s.fov_percent - 50.0).abs() < 1e-12);
         assert_eq!(s.filter_step_ms, 2.0);
         assert!(s.guidance_step_ms.is_nan());
+    }
+
+    #[test]
+    fn the_search_ends_at_the_first_measurement_and_tracking_is_averaged_from_there() {
+        let at = |t_s: f64, off_m: f64, measured: bool| StepRecord {
+            t_s,
+            ..rec(
+                Enu2::new(off_m, 0.0),
+                Enu2::zeros(),
+                Enu2::zeros(),
+                measured,
+            )
+        };
+        // 100 m off while searching, then 2 m and 4 m off (one step unseen).
+        let steps = vec![
+            at(0.5, 100.0, false),
+            at(1.0, 100.0, false),
+            at(1.5, 2.0, true),
+            at(2.0, 4.0, false),
+        ];
+        let s = RunSummary::from_steps(&steps, &[], &[]);
+        assert_eq!(s.first_sighting_s, Some(1.5));
+        assert!((s.tracking_error_after_first_sighting_m.unwrap() - 3.0).abs() < 1e-12);
+        assert!((s.tracking_error_m - 51.5).abs() < 1e-12);
+        // Never seen: no search length, no tracking after it.
+        let never = RunSummary::from_steps(&steps[..2], &[], &[]);
+        assert_eq!(never.first_sighting_s, None);
+        assert_eq!(never.tracking_error_after_first_sighting_m, None);
+        assert_eq!(RunSummary::from_steps(&[], &[], &[]).first_sighting_s, None);
+
+        let runs = [s, never, s];
+        let search = SearchSummary::over(&runs);
+        assert_eq!(search.never_seen_runs, 1);
+        assert_eq!(search.first_sighting_s_median, 1.5);
+        assert!((search.tracking_error_after_first_sighting_m.mean - 3.0).abs() < 1e-12);
+        let none = SearchSummary::over(&[never]);
+        assert_eq!(none.never_seen_runs, 1);
+        assert!(none.first_sighting_s_median.is_nan());
     }
 }

@@ -3,6 +3,7 @@
 use std::fmt::Write;
 
 use crate::metrics::WelchResult;
+use crate::sim::monte_carlo::ComboResult;
 use crate::sim::MonteCarloResult;
 
 fn p(w: &Option<WelchResult>) -> String {
@@ -65,8 +66,28 @@ pub fn render(r: &MonteCarloResult) -> String {
             pv
         );
     }
+    for c in &r.results {
+        let _ = writeln!(s, "{}", search_line(c));
+    }
     for why in &r.refused {
         let _ = writeln!(s, "refused: {why}");
     }
     s
+}
+
+/// One combination's search apart from its tracking, under the table.
+fn search_line(c: &ComboResult) -> String {
+    let k = &c.search;
+    let seen = c.runs - k.never_seen_runs;
+    if seen == 0 {
+        return format!(
+            "search {}/{}: the target was never seen in {} runs",
+            c.guidance, c.motion, c.runs
+        );
+    }
+    let after = &k.tracking_error_after_first_sighting_m;
+    format!(
+        "search {}/{}: first sighting at {:.1} s (median of {seen} runs), never seen in {} of {}; tracking error after it {:.3} ± {:.3} m",
+        c.guidance, c.motion, k.first_sighting_s_median, k.never_seen_runs, c.runs, after.mean, after.sd
+    )
 }

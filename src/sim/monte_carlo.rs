@@ -11,7 +11,9 @@ use serde::Serialize;
 use super::run::{check_combination, run_once, EstimatorKind, RunError, RunOutput, RunSpec};
 use crate::config::Config;
 use crate::guidance::GuidanceKind;
-use crate::metrics::{mean_sd, median, welch_t_test, MeanSd, RunSummary, WelchResult};
+use crate::metrics::{
+    mean_sd, median, welch_t_test, MeanSd, RunSummary, SearchSummary, WelchResult,
+};
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -93,6 +95,9 @@ pub struct ComboResult {
     /// Frame statistics (vision mode only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vision: Option<VisionSummary>,
+    /// The search apart from the tracking: runs that never saw the target, the median
+    /// time of the first sighting, and the tracking error after it.
+    pub search: SearchSummary,
     /// Per-run summaries.
     pub per_run: Vec<RunSummary>,
 }
@@ -233,6 +238,7 @@ fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput]) -> ComboRes
                     roi_hits: a.roi_hits + v.roi_hits,
                 })
             }),
+        search: SearchSummary::over(&per_run),
         per_run,
     }
 }
