@@ -189,8 +189,9 @@ impl Tracker {
     /// straight, kept the offset it had from cutting a junction's corner, and passed the car
     /// 15-20 m beside its road, outside the view's shorter side. Flying the roads after a
     /// loss too: +1.4 and +1.6 points of FOV over 22 worlds on two seeds, the closed loop's
-    /// seed 3 25.3 -> 6.7 m, but two closed-loop seeds of 80 lost for good, where the setpoint
-    /// (one reach ahead) overshoots a waypoint near the path's end (part 62).
+    /// seed 3 25.3 -> 6.7 m, but two closed-loop seeds of 80 lost for good where the car
+    /// turns back unseen under cover (part 62). There the road path was in force for one
+    /// plan only; the drone's flight past the cover came from EER's near waypoints (part 63).
     pub(super) fn along_the_roads(
         &self,
         vehicle_enu: &Enu2,
