@@ -78,21 +78,24 @@ impl RunSummary {
         let n = steps.len().max(1) as f64;
         let first = steps.iter().position(|s| s.measurement_enu.is_some());
         Self {
-            tracking_error_m: steps.iter().map(|s| s.tracking_error_m()).sum::<f64>() / n,
-            estimation_error_m: steps.iter().map(|s| s.estimation_error_m()).sum::<f64>() / n,
-            cov_det: steps.iter().map(|s| s.cov_det()).sum::<f64>() / n,
+            tracking_error_m: mean_over(steps, StepRecord::tracking_error_m),
+            estimation_error_m: mean_over(steps, StepRecord::estimation_error_m),
+            cov_det: mean_over(steps, StepRecord::cov_det),
             fov_percent: 100.0
                 * steps.iter().filter(|s| s.measurement_enu.is_some()).count() as f64
                 / n,
             filter_step_ms: median(filter_ms),
             guidance_step_ms: median(guidance_ms),
             first_sighting_s: first.map(|k| steps[k].t_s),
-            tracking_error_after_first_sighting_m: first.map(|k| {
-                let after = &steps[k..];
-                after.iter().map(|s| s.tracking_error_m()).sum::<f64>() / after.len() as f64
-            }),
+            tracking_error_after_first_sighting_m: first
+                .map(|k| mean_over(&steps[k..], StepRecord::tracking_error_m)),
         }
     }
+}
+
+/// The mean of `f` over `steps` (0 for none).
+fn mean_over(steps: &[StepRecord], f: fn(&StepRecord) -> f64) -> f64 {
+    steps.iter().map(f).sum::<f64>() / steps.len().max(1) as f64
 }
 
 /// The search apart from the tracking, over a set of runs: how many never saw the target,
