@@ -75,15 +75,13 @@ pub struct RunSummary {
 impl RunSummary {
     /// From a run's step records and timings.
     pub fn from_steps(steps: &[StepRecord], filter_ms: &[f64], guidance_ms: &[f64]) -> Self {
-        let n = steps.len().max(1) as f64;
         let first = steps.iter().position(|s| s.measurement_enu.is_some());
         Self {
             tracking_error_m: mean_over(steps, StepRecord::tracking_error_m),
             estimation_error_m: mean_over(steps, StepRecord::estimation_error_m),
             cov_det: mean_over(steps, StepRecord::cov_det),
             fov_percent: 100.0
-                * steps.iter().filter(|s| s.measurement_enu.is_some()).count() as f64
-                / n,
+                * mean_over(steps, |s| f64::from(u8::from(s.measurement_enu.is_some()))),
             filter_step_ms: median(filter_ms),
             guidance_step_ms: median(guidance_ms),
             first_sighting_s: first.map(|k| steps[k].t_s),
