@@ -80,8 +80,14 @@ impl RunSummary {
             tracking_error_m: mean_over(steps, StepRecord::tracking_error_m),
             estimation_error_m: mean_over(steps, StepRecord::estimation_error_m),
             cov_det: mean_over(steps, StepRecord::cov_det),
-            fov_percent: 100.0
-                * mean_over(steps, |s| f64::from(u8::from(s.measurement_enu.is_some()))),
+            // 100 per measured step, so the sum is exactly 100 x the count, as before.
+            fov_percent: mean_over(steps, |s| {
+                if s.measurement_enu.is_some() {
+                    100.0
+                } else {
+                    0.0
+                }
+            }),
             filter_step_ms: median(filter_ms),
             guidance_step_ms: median(guidance_ms),
             first_sighting_s: first.map(|k| steps[k].t_s),
