@@ -3,7 +3,7 @@
 
     python3 scripts/world-batch.py run --bin target/release/infotrack --out DIR [--seed S]
         [--set random|stand-ins|all] [--jobs 2] [--guidance eer] [--motion cv] [--runs 10]
-        [--duration SECONDS]
+        [--duration SECONDS] [--key SECTION.KEY=VALUE ...]
     python3 scripts/world-batch.py compare DIR_A DIR_B
 
 Issue 12's last target (EER keeps the target in view >= 60 % of the time with a mean
@@ -21,6 +21,11 @@ writes DIR/summary.json (the figures per world, with each run's) and prints a ta
 world the mean %FOV and tracking error, how many runs never saw the target and the tracking
 error after the first sighting (the search apart from the tracking; BENCHMARKS.md part 63),
 then the mean %FOV over the set and on how many worlds both targets hold.
+
+`--key guidance.view_heading='"informed"'` (repeatable; the value is written as TOML, so a
+string keeps its quotes) flies a copy of every world, written to DIR/worlds, with that key set:
+a config variant measured on the same worlds and seeds as its base, with no scratch build. A
+key the world already sets is refused, so a variant never silently replaces a world's value.
 
 `compare` pairs two summaries world by world (a change measured against its base, both run
 with the same seed): the %FOV difference's mean and paired t statistic, and the worlds on
@@ -69,6 +74,47 @@ def draw_random_worlds(worlds_dir):
 def stand_in_worlds():
     """The hand-written field worlds, [(name, path)]."""
     return [(p.stem, p) for p in sorted((ROOT / "config").glob("field-*.toml"))]
+
+
+def parse_key(text):
+    """`SECTION.KEY=VALUE` (the section may be dotted: `guidance.lawn.x=1`) -> (section, key,
+    value); exits naming the argument when it is not of that form."""
+    path, sep, value = text.partition("=")
+    section, dot, key = path.strip().rpartition(".")
+    if not (sep and dot and section and key and value.strip()):
+        sys.exit(f"--key {text!r}: expected SECTION.KEY=VALUE, e.g. guidance.intercept_within_s=10")
+    return section, key.strip(), value.strip()
+
+
+def with_keys(name, text, keys):
+    """The world's TOML text with each (section, key, value) set: inserted under the section's
+    header, or the section appended when the world has none. Exits when the world already sets
+    the key (a variant must not silently replace a world's own value)."""
+    lines = text.splitlines()
+    for section, key, value in keys:
+        header = f"[{section}]"
+        start = next((i for i, l in enumerate(lines) if l.strip() == header), None)
+        if start is None:
+            lines += ["", header, f"{key} = {value}"]
+            continue
+        end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
+        if any(l.split("=")[0].strip() == key for l in lines[start + 1 : end] if "=" in l):
+            sys.exit(f"--key {section}.{key}: world {name} already sets it")
+        lines.insert(start + 1, f"{key} = {value}")
+    return "\n".join(lines) + "\n"
+
+
+def apply_keys(worlds, worlds_dir, keys):
+    """Copies of `worlds` with `keys` set, written to `worlds_dir`; returns [(name, path)]."""
+    if not keys:
+        return worlds
+    worlds_dir.mkdir(parents=True, exist_ok=True)
+    out = []
+    for name, path in worlds:
+        copy = worlds_dir / f"{name}.toml"
+        copy.write_text(with_keys(name, pathlib.Path(path).read_text(), keys))
+        out.append((name, copy))
+    return out
 
 
 def fly(binary, name, config, json_path, args):
@@ -147,6 +193,7 @@ def run(args):
         worlds += draw_random_worlds(out / "worlds")
     if args.set in ("stand-ins", "all"):
         worlds += stand_in_worlds()
+    worlds = apply_keys(worlds, out / "worlds", [parse_key(k) for k in args.key])
     (out / "json").mkdir(parents=True, exist_ok=True)
     rows = {}
     with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
@@ -170,6 +217,7 @@ def run(args):
         "motion": args.motion,
         "runs": args.runs,
         "duration_s": args.duration,
+        "keys": args.key,
         "worlds": ordered,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
@@ -266,6 +314,13 @@ def main():
     r.add_argument("--duration", type=float, default=None, help="seconds per run (default: each world's)")
     r.add_argument("--guidance", default="eer")
     r.add_argument("--motion", default="cv")
+    r.add_argument(
+        "--key",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=VALUE",
+        help="set this key (TOML value) in a copy of every world; repeatable",
+    )
     c = sub.add_parser("compare", help="pair two measurements world by world")
     c.add_argument("a", help="the base's --out directory")
     c.add_argument("b", help="the change's --out directory")

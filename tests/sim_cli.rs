@@ -538,3 +538,78 @@ fn world_batch_measures_the_stand_ins_as_sim_does() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+/// `scripts/world-batch.py --key SECTION.KEY=VALUE` flies a copy of every world with the key
+/// set: the copies are written beside the batch and hold the key under its section, the
+/// batch's row for a world is what `infotrack sim` reports on that copy, and a key a world
+/// already sets, or an argument that is not `SECTION.KEY=VALUE`, is refused by name.
+#[test]
+fn world_batch_flies_a_config_variant_from_a_key() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let script = root.join("scripts/world-batch.py");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("informed");
+    let batch = |out: &Path, key: &str| {
+        Command::new("python3")
+            .arg(&script)
+            .args(["run", "--bin", env!("CARGO_BIN_EXE_infotrack"), "--out"])
+            .arg(out)
+            .args(["--set", "stand-ins", "--runs", "1", "--duration", "20"])
+            .args(["--seed", "2", "--key", key])
+            .output()
+            .unwrap()
+    };
+    let o = batch(&out, "guidance.view_heading=\"informed\"");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary = read_json(&out.join("summary.json"));
+    assert_eq!(summary["keys"][0], "guidance.view_heading=\"informed\"");
+    let copy = out.join("worlds/field-grid.toml");
+    let text = std::fs::read_to_string(&copy).unwrap();
+    let table: toml::Table = text.parse().unwrap();
+    assert_eq!(table["guidance"]["view_heading"].as_str(), Some("informed"));
+    let grid = &summary["worlds"]["field-grid"];
+    assert_eq!(grid["config"].as_str(), Some(copy.to_str().unwrap()));
+
+    // The copy's row is what sim reports on the copy.
+    let by_hand = |config: &Path| {
+        let json = dir.path().join("by-hand.json");
+        let o = infotrack()
+            .arg("sim")
+            .arg("--config")
+            .arg(config)
+            .args(["--runs", "1", "--duration", "20", "--seed", "2"])
+            .args([
+                "--guidance",
+                "eer",
+                "--motion",
+                "cv",
+                "--quiet",
+                "--threads",
+                "1",
+            ])
+            .arg("--json")
+            .arg(&json)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        num(
+            &read_json(&json)["results"][0],
+            &["tracking_error_m", "mean"],
+        )
+    };
+    assert_eq!(by_hand(&copy), num(grid, &["tracking_error_m"]));
+
+    // A key the world sets already is refused, naming the key and the world.
+    let o = batch(&dir.path().join("twice"), "guidance.horizon_steps=3");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("guidance.horizon_steps") && err.contains("already sets it"),
+        "{err}"
+    );
+    // Not SECTION.KEY=VALUE.
+    let o = batch(&dir.path().join("bad"), "informed");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("expected SECTION.KEY=VALUE"), "{err}");
+}
