@@ -433,6 +433,36 @@ fn rust_log_is_honoured_and_piped_logs_are_plain_text() {
     assert!(!String::from_utf8_lossy(&o.stderr).contains("RUST_LOG"));
 }
 
+/// `infotrack sim` on `config` with the arguments `scripts/world-batch.py` passes (seed 2,
+/// EER with CV, one thread), its `--json` written to `json` and returned.
+fn sim_as_the_batch_does(
+    config: &Path,
+    runs: &str,
+    duration_s: &str,
+    json: &Path,
+) -> serde_json::Value {
+    let o = infotrack()
+        .arg("sim")
+        .arg("--config")
+        .arg(config)
+        .args(["--runs", runs, "--duration", duration_s, "--seed", "2"])
+        .args([
+            "--guidance",
+            "eer",
+            "--motion",
+            "cv",
+            "--quiet",
+            "--threads",
+            "1",
+        ])
+        .arg("--json")
+        .arg(json)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    read_json(json)
+}
+
 /// `scripts/world-batch.py` flies every stand-in through `sim --json` and keeps its figures:
 /// a world's row is what `infotrack sim` run by hand with the same arguments reports, the
 /// table counts the worlds that meet both of issue 12's targets, a measurement compared
@@ -470,27 +500,12 @@ fn world_batch_measures_the_stand_ins_as_sim_does() {
     assert_eq!(worlds.len(), stand_ins, "{table}");
 
     // field-grid by hand, with the arguments the script passes.
-    let json = dir.path().join("grid.json");
-    let o = infotrack()
-        .arg("sim")
-        .arg("--config")
-        .arg(root.join("config/field-grid.toml"))
-        .args(["--runs", "2", "--duration", "40", "--seed", "2"])
-        .args([
-            "--guidance",
-            "eer",
-            "--motion",
-            "cv",
-            "--quiet",
-            "--threads",
-            "1",
-        ])
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let by_hand = read_json(&json);
+    let by_hand = sim_as_the_batch_does(
+        &root.join("config/field-grid.toml"),
+        "2",
+        "40",
+        &dir.path().join("grid.json"),
+    );
     let row = &by_hand["results"][0];
     let grid = &worlds["field-grid"];
     // Something to compare: the car seen in some runs but not in every step.
@@ -571,33 +586,11 @@ fn world_batch_flies_a_config_variant_from_a_key() {
     assert_eq!(grid["config"].as_str(), Some(copy.to_str().unwrap()));
 
     // The copy's row is what sim reports on the copy.
-    let by_hand = |config: &Path| {
-        let json = dir.path().join("by-hand.json");
-        let o = infotrack()
-            .arg("sim")
-            .arg("--config")
-            .arg(config)
-            .args(["--runs", "1", "--duration", "20", "--seed", "2"])
-            .args([
-                "--guidance",
-                "eer",
-                "--motion",
-                "cv",
-                "--quiet",
-                "--threads",
-                "1",
-            ])
-            .arg("--json")
-            .arg(&json)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        num(
-            &read_json(&json)["results"][0],
-            &["tracking_error_m", "mean"],
-        )
-    };
-    assert_eq!(by_hand(&copy), num(grid, &["tracking_error_m"]));
+    let by_hand = sim_as_the_batch_does(&copy, "1", "20", &dir.path().join("by-hand.json"));
+    assert_eq!(
+        num(&by_hand["results"][0], &["tracking_error_m", "mean"]),
+        num(grid, &["tracking_error_m"])
+    );
 
     // A key the world sets already is refused, naming the key and the world.
     let o = batch(&dir.path().join("twice"), "guidance.horizon_steps=3");
