@@ -787,3 +787,53 @@ fn informed_heading_turns_the_long_side_across_two_exits() {
     // Each place counts once, whatever its number of views.
     assert_eq!(informed.candidates, along.candidates);
 }
+
+/// Two equal clusters of hypotheses driving north at 10 m/s, 25 m north and 25 m south of
+/// a drone facing north (its view 35 m deep north-south: one cluster at a time), flying at
+/// 15 m/s: counting its momentum, the plan flies to the cluster ahead of it, whichever way
+/// it flies (the one behind is seconds late, its hypotheses gone on); with the momentum
+/// off, or the vehicle's velocity unknown, the paper's plan, the same either way.
+#[test]
+fn the_momentum_sends_the_drone_to_the_cluster_ahead_of_it() {
+    let c = outdoor();
+    let world = c.world();
+    let mut rng = CoreRng::seed_from_u64(66);
+    let agent = Enu2::new(300.0, 400.0);
+    let (north, south) = (agent + Enu2::new(0.0, 25.0), agent - Enu2::new(0.0, 25.0));
+    let mut belief = still_belief(40, &world, &mut rng, |k, rng| {
+        let at = if k % 2 == 0 { north } else { south };
+        at + Enu2::new(rng.gen_range(-2.0..2.0), rng.gen_range(-2.0..2.0))
+    });
+    belief
+        .velocity
+        .iter_mut()
+        .for_each(|v| *v = Enu2::new(0.0, 10.0));
+    let params = c.eer_params();
+    assert_eq!(params.momentum_accel_mps2, Some(c.agent.accel_limit_mps2));
+    let decide = |params: &EerParams, velocity_enu: Option<Enu2>| {
+        let mut planner = EerPlanner::new(params.clone());
+        planner.inputs = belief.clone();
+        planner.set_vehicle_velocity(velocity_enu);
+        planner
+            .decide(&View::north(agent), &HeadingRule::north(), &world)
+            .waypoint_enu
+    };
+    let (northbound, southbound) = (Enu2::new(0.0, 15.0), Enu2::new(0.0, -15.0));
+    let sees = |w: Enu2, p: Enu2| world.footprint.contains(&View::north(w), &p);
+    let to_north = decide(&params, Some(northbound));
+    assert!(
+        sees(to_north, north) && !sees(to_north, south),
+        "{to_north}"
+    );
+    let to_south = decide(&params, Some(southbound));
+    assert!(
+        sees(to_south, south) && !sees(to_south, north),
+        "{to_south}"
+    );
+    // Unknown velocity, or the momentum off: one plan whichever way the drone was flying.
+    let unknown = decide(&params, None);
+    let mut off = params.clone();
+    off.momentum_accel_mps2 = None;
+    assert_eq!(decide(&off, Some(northbound)), unknown);
+    assert_eq!(decide(&off, Some(southbound)), unknown);
+}
