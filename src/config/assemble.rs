@@ -138,10 +138,6 @@ impl Config {
             search_commitment: g.search_commitment.unwrap_or(DEFAULT_SEARCH_COMMITMENT),
             centring_share: g.centring_share.unwrap_or(DEFAULT_CENTRING_SHARE),
             search_escape_floor: g.search_escape_floor.unwrap_or(DEFAULT_SEARCH_ESCAPE_FLOOR),
-            momentum_accel_mps2: g
-                .plan_momentum
-                .unwrap_or(self.acquisition.is_some())
-                .then_some(self.agent.accel_limit_mps2),
         }
     }
 

@@ -578,14 +578,6 @@ pub struct GuidanceConfig {
     /// (0.1 before session 48, part 46); 1 restores the paper's. Without a cue (the lab), never applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_escape_floor: Option<f64>,
-    /// Whether EER counts the vehicle's momentum: each candidate is judged when the drone,
-    /// moving as it is and braking at `agent.accel_limit_mps2`, gets there, its hypotheses
-    /// carried on by the delay (a candidate behind a drone at 15 m/s is seconds late; the
-    /// paper's agent stops at once). A departure from the paper (BENCHMARKS "Field scale,
-    /// part 66"). Optional; absent, on with an `[acquisition]` cue (a field flight), off
-    /// without (the lab).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub plan_momentum: Option<bool>,
     /// Which way the camera's image faces: `north` (the paper's constant heading, the image's
     /// width along world east), `along_track` (the image's width, its long side, along the
     /// direction of travel, a chased car's road; the vehicle turns at

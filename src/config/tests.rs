@@ -408,32 +408,6 @@ fn the_intercept_lead_is_optional_and_a_bad_one_is_named() {
     }
 }
 
-/// `guidance.plan_momentum`: absent, on with a cue (EER given the agent's acceleration
-/// limit) and off in the lab; a value is kept either way.
-#[test]
-fn the_momentum_defaults_by_the_cue_and_a_value_is_kept() {
-    let lab = Config::default_lab();
-    assert_eq!(lab.guidance.plan_momentum, None);
-    assert_eq!(lab.eer_params().momentum_accel_mps2, None);
-    let outdoor =
-        Config::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml")).unwrap();
-    assert_eq!(
-        outdoor.eer_params().momentum_accel_mps2,
-        Some(outdoor.agent.accel_limit_mps2)
-    );
-    let mut off = outdoor.clone();
-    off.guidance.plan_momentum = Some(false);
-    assert_eq!(off.eer_params().momentum_accel_mps2, None);
-    let on = load_modified(|t| {
-        tbl(t, "guidance").insert("plan_momentum".into(), true.into());
-    })
-    .unwrap();
-    assert_eq!(
-        on.eer_params().momentum_accel_mps2,
-        Some(on.agent.accel_limit_mps2)
-    );
-}
-
 /// `guidance.view_heading`: absent, the lab (no cue) keeps the paper's constant heading and
 /// a flight from an operator's cue turns the view along the track; a value is kept; a
 /// wrong one is refused naming the key and the names it takes.

@@ -40,10 +40,8 @@ use rand::Rng;
 
 mod commitment;
 mod escape;
-mod momentum;
 pub use commitment::{committed_choice, Centring};
 pub use escape::{speed_away_mps, weigh_by_escape, DEFAULT_SEARCH_ESCAPE_FLOOR};
-pub use momentum::{arrival_s, momentum_delays_s, Momentum};
 
 use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
 use super::view_heading::HeadingRule;
@@ -107,10 +105,6 @@ pub struct EerParams {
     /// driving away from the agent relative to one driving away at the fastest speed
     /// ([`weigh_by_escape`]); 1: the paper's weights.
     pub search_escape_floor: f64,
-    /// The vehicle's horizontal acceleration limit, m/s^2, when the plan counts its momentum
-    /// ([`momentum_delays_s`]: each candidate judged when the vehicle, moving as it is, gets
-    /// there); `None`: the paper's agent, which stops and turns at once.
-    pub momentum_accel_mps2: Option<f64>,
 }
 
 /// Everything the evaluation needs, after the rollout: pure data.
@@ -590,10 +584,6 @@ pub fn belief_is_concentrated(pf: &ParticleFilter, world: &World) -> bool {
     cov[(0, 0)].sqrt() <= 0.5 * fp.half_width_m && cov[(1, 1)].sqrt() <= 0.5 * fp.half_height_m
 }
 
-/// How much longer than the horizon (and the intercepts' look-ahead) the momentum's flight
-/// model runs, s: time enough to stop from the top speed and turn back.
-const MOMENTUM_MARGIN_S: f64 = 10.0;
-
 /// The EER guidance law: owns its scratch buffers across cycles.
 #[derive(Debug, Clone)]
 pub struct EerPlanner {
@@ -611,8 +601,6 @@ pub struct EerPlanner {
     /// The target's velocity, world ENU, m/s, while the vehicle rides along with it (the
     /// belief concentrated under the view): the candidates' views turn as the command will.
     over_target_velocity_enu: Option<Enu2>,
-    /// The vehicle's velocity now, world ENU, m/s, for the momentum's delays.
-    vehicle_velocity_enu: Option<Enu2>,
 }
 
 impl EerPlanner {
@@ -667,13 +655,7 @@ impl EerPlanner {
             last_waypoint_enu: None,
             escape_weighting: false,
             over_target_velocity_enu: None,
-            vehicle_velocity_enu: None,
         }
-    }
-
-    /// The vehicle's velocity now (world ENU, m/s; `None`: unknown, no momentum counted).
-    pub fn set_vehicle_velocity(&mut self, velocity_enu: Option<Enu2>) {
-        self.vehicle_velocity_enu = velocity_enu;
     }
 
     /// Whether the vehicle rides along with the target at this velocity (world ENU, m/s;
@@ -799,7 +781,6 @@ impl EerPlanner {
             ),
             _ => Vec::new(),
         };
-        let leads = self.with_momentum(leads, &cands, agent_enu, horizon_s, world);
         // Every view of every place, each with its place and its lead.
         let over_target = self.over_target_velocity_enu;
         let (mut places, mut views, mut view_leads) = (Vec::new(), Vec::new(), Vec::new());
@@ -851,42 +832,6 @@ impl EerPlanner {
             candidates: cands.len(),
             view_yaw_enu_rad,
         }
-    }
-
-    /// Each candidate's lead (`leads`, from the intercepts; empty: all zero) lengthened by
-    /// the vehicle's momentum ([`momentum_delays_s`]) when the plan counts it and the
-    /// vehicle's velocity is known.
-    fn with_momentum(
-        &self,
-        mut leads: Vec<f64>,
-        cands: &[Enu2],
-        agent_enu: &Enu2,
-        horizon_s: f64,
-        world: &World,
-    ) -> Vec<f64> {
-        let p = &self.params;
-        let (Some(accel), Some(velocity_enu)) = (p.momentum_accel_mps2, self.vehicle_velocity_enu)
-        else {
-            return leads;
-        };
-        if horizon_s <= 0.0 {
-            return leads;
-        }
-        let m = Momentum {
-            velocity_enu,
-            accel_limit_mps2: accel,
-            speed_limit_mps: p.reach_m / horizon_s,
-            arrived_within_m: world.footprint.quarter_view_m(),
-            longest_s: horizon_s + p.intercept_within_s.unwrap_or(0.0) + MOMENTUM_MARGIN_S,
-        };
-        leads.resize(cands.len(), 0.0);
-        for (lead, delay) in leads
-            .iter_mut()
-            .zip(momentum_delays_s(cands, agent_enu, horizon_s, &m))
-        {
-            *lead += delay;
-        }
-        leads
     }
 
     /// A whole cycle.

@@ -240,11 +240,6 @@ pub struct Tracker {
     /// The frames without the target since the last measurement (time, the camera's view),
     /// oldest first, at most [`MAX_EMPTY_FRAMES`].
     empty_frames: std::collections::VecDeque<(f64, View)>,
-    /// The vehicle's position at the last filter step (time, world ENU), for its velocity.
-    last_vehicle: Option<(f64, Enu2)>,
-    /// The vehicle's velocity over the last filter period, world ENU, m/s (`None` until two
-    /// filter steps have known its position): the momentum EER plans with.
-    vehicle_velocity_enu: Option<Enu2>,
 }
 
 impl Tracker {
@@ -309,8 +304,6 @@ impl Tracker {
             last_seen_velocity_enu: Enu2::zeros(),
             recent_measurements: std::collections::VecDeque::new(),
             empty_frames: std::collections::VecDeque::new(),
-            last_vehicle: None,
-            vehicle_velocity_enu: None,
         })
     }
 
@@ -393,7 +386,6 @@ impl Tracker {
         input: &TickInput,
         clock: &dyn Clock,
     ) -> Result<StepOutcome, TrackerError> {
-        self.track_vehicle(t_s, input.vehicle_enu);
         let vehicle_enu = input.vehicle_enu.unwrap_or(Enu2::new(f64::NAN, f64::NAN));
         let (taken_from, z, frame) = match observation {
             Observation::Frame { taken_from, z } => (taken_from, z, true),

@@ -4,22 +4,6 @@
 use super::*;
 
 impl Tracker {
-    /// Keeps the vehicle's velocity over the last filter period from its positions at the
-    /// filter steps (`None` where its position is unknown): the momentum EER plans with. The
-    /// positions, not a reported velocity, so that `infotrack replay` plans as the flight did.
-    pub(super) fn track_vehicle(&mut self, t_s: f64, vehicle_enu: Option<Enu2>) {
-        let Some(now) = vehicle_enu.filter(|p| p.x.is_finite() && p.y.is_finite()) else {
-            self.last_vehicle = None;
-            self.vehicle_velocity_enu = None;
-            return;
-        };
-        self.vehicle_velocity_enu = self
-            .last_vehicle
-            .filter(|(t, _)| t_s > *t)
-            .map(|(t, before)| (now - before) / (t_s - t));
-        self.last_vehicle = Some((t_s, now));
-    }
-
     /// One guidance decision at `t_s` for a vehicle seeing `vehicle` (`truth`: the true
     /// target's position and velocity, world ENU, where a simulator knows them). `None`: no
     /// decision is taken on a stale vehicle state (link lost). Public for `infotrack
@@ -145,7 +129,6 @@ impl Tracker {
         self.planner
             .weigh_escape(self.last_measurement.is_none() && self.params.cue.is_some());
         self.planner.set_searching(searching);
-        self.planner.set_vehicle_velocity(self.vehicle_velocity_enu);
         self.planner.ride_along(
             (over_target_velocity_enu != Enu2::zeros()).then_some(over_target_velocity_enu),
         );

@@ -904,25 +904,3 @@ fn after_a_loss_a_far_waypoint_is_flown_to_along_the_roads() {
         "{velocity_enu}"
     );
 }
-
-/// The vehicle's velocity EER plans its momentum with comes from its positions at the
-/// filter steps, in world ENU, east and north alike; unknown at the first step and again
-/// after a step without a position.
-#[test]
-fn the_vehicle_velocity_is_its_positions_over_the_filter_period() {
-    let c = outdoor_config();
-    let mut t = tracker(&c, GuidanceKind::Eer, false);
-    let dt = c.filter_dt_s();
-    t.track_vehicle(1.0, Some(Enu2::new(10.0, 20.0)));
-    assert_eq!(t.vehicle_velocity_enu, None);
-    t.track_vehicle(1.0 + dt, Some(Enu2::new(10.0 + 15.0 * dt, 20.0 - 5.0 * dt)));
-    let v = t.vehicle_velocity_enu.unwrap();
-    assert!((v - Enu2::new(15.0, -5.0)).norm() < 1e-9, "{v}");
-    t.track_vehicle(1.0 + 2.0 * dt, None);
-    assert_eq!(t.vehicle_velocity_enu, None);
-    t.track_vehicle(1.0 + 3.0 * dt, Some(Enu2::new(0.0, 0.0)));
-    assert_eq!(t.vehicle_velocity_enu, None);
-    t.track_vehicle(1.0 + 4.0 * dt, Some(Enu2::new(0.0, -12.0 * dt)));
-    let v = t.vehicle_velocity_enu.unwrap();
-    assert!((v - Enu2::new(0.0, -12.0)).norm() < 1e-9, "{v}");
-}
