@@ -3,7 +3,7 @@
 
     python3 scripts/world-batch.py run --bin target/release/infotrack --out DIR [--seed S]
         [--set random|stand-ins|all] [--jobs 2] [--guidance eer] [--motion cv] [--runs 10]
-        [--duration SECONDS] [--key SECTION.KEY=VALUE ...]
+        [--duration SECONDS] [--key SECTION.KEY=VALUE ...] [--scale SECTION.KEY=FACTOR ...]
     python3 scripts/world-batch.py compare DIR_A DIR_B
 
 Issue 12's last target (EER keeps the target in view >= 60 % of the time with a mean
@@ -26,6 +26,12 @@ then the mean %FOV over the set and on how many worlds both targets hold.
 string keeps its quotes) flies a copy of every world, written to DIR/worlds, with that key set:
 a config variant measured on the same worlds and seeds as its base, with no scratch build. A
 key the world already sets is refused, so a variant never silently replaces a world's value.
+
+`--scale agent.accel_limit_mps2=2` (repeatable) multiplies a number every world sets by the
+factor, in a copy written to DIR/worlds: a diagnostic of what a world's own setting decides
+(BENCHMARKS.md part 65 doubled the drone's acceleration by hand), not a variant of the
+product. A world that does not set the key, or sets it to something other than one number,
+is refused, naming the world.
 
 `compare` pairs two summaries world by world (a change measured against its base, both run
 with the same seed): the %FOV difference's mean and paired t statistic, and the worlds on
@@ -104,15 +110,53 @@ def with_keys(name, text, keys):
     return "\n".join(lines) + "\n"
 
 
-def apply_keys(worlds, worlds_dir, keys):
+def parse_scale(text):
+    """`SECTION.KEY=FACTOR` -> (section, key, factor); exits naming the argument when it is
+    not of that form or the factor is not a finite number."""
+    section, key, value = parse_key(text)
+    try:
+        factor = float(value)
+    except ValueError:
+        factor = math.nan
+    if not math.isfinite(factor):
+        sys.exit(f"--scale {text!r}: expected SECTION.KEY=FACTOR with a number, e.g. agent.accel_limit_mps2=2")
+    return section, key, factor
+
+
+def with_scales(name, text, scales):
+    """The world's TOML text with each (section, key, factor)'s number multiplied by the
+    factor. Exits when the world does not set the key to one number."""
+    lines = text.splitlines()
+    for section, key, factor in scales:
+        header = f"[{section}]"
+        start = next((i for i, l in enumerate(lines) if l.strip() == header), None)
+        end = len(lines) if start is None else next(
+            (i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines)
+        )
+        at = None if start is None else next(
+            (i for i in range(start + 1, end) if "=" in lines[i] and lines[i].split("=")[0].strip() == key), None
+        )
+        if at is None:
+            sys.exit(f"--scale {section}.{key}: world {name} does not set it")
+        value = lines[at].split("=", 1)[1].split("#")[0].strip()
+        try:
+            number = float(value)
+        except ValueError:
+            sys.exit(f"--scale {section}.{key}: world {name} sets it to {value!r}, not one number")
+        lines[at] = f"{key} = {number * factor!r}"
+    return "\n".join(lines) + "\n"
+
+
+def apply_keys(worlds, worlds_dir, keys, scales=()):
     """Copies of `worlds` with `keys` set, written to `worlds_dir`; returns [(name, path)]."""
-    if not keys:
+    if not keys and not scales:
         return worlds
     worlds_dir.mkdir(parents=True, exist_ok=True)
     out = []
     for name, path in worlds:
         copy = worlds_dir / f"{name}.toml"
-        copy.write_text(with_keys(name, pathlib.Path(path).read_text(), keys))
+        text = with_keys(name, pathlib.Path(path).read_text(), keys)
+        copy.write_text(with_scales(name, text, scales))
         out.append((name, copy))
     return out
 
@@ -193,7 +237,9 @@ def run(args):
         worlds += draw_random_worlds(out / "worlds")
     if args.set in ("stand-ins", "all"):
         worlds += stand_in_worlds()
-    worlds = apply_keys(worlds, out / "worlds", [parse_key(k) for k in args.key])
+    worlds = apply_keys(
+        worlds, out / "worlds", [parse_key(k) for k in args.key], [parse_scale(k) for k in args.scale]
+    )
     (out / "json").mkdir(parents=True, exist_ok=True)
     rows = {}
     with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
@@ -218,6 +264,7 @@ def run(args):
         "runs": args.runs,
         "duration_s": args.duration,
         "keys": args.key,
+        "scales": args.scale,
         "worlds": ordered,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
@@ -320,6 +367,13 @@ def main():
         default=[],
         metavar="SECTION.KEY=VALUE",
         help="set this key (TOML value) in a copy of every world; repeatable",
+    )
+    r.add_argument(
+        "--scale",
+        action="append",
+        default=[],
+        metavar="SECTION.KEY=FACTOR",
+        help="multiply this number, which every world sets, in a copy of every world (a diagnostic); repeatable",
     )
     c = sub.add_parser("compare", help="pair two measurements world by world")
     c.add_argument("a", help="the base's --out directory")

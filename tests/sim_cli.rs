@@ -560,20 +560,9 @@ fn world_batch_measures_the_stand_ins_as_sim_does() {
 /// already sets, or an argument that is not `SECTION.KEY=VALUE`, is refused by name.
 #[test]
 fn world_batch_flies_a_config_variant_from_a_key() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let script = root.join("scripts/world-batch.py");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("informed");
-    let batch = |out: &Path, key: &str| {
-        Command::new("python3")
-            .arg(&script)
-            .args(["run", "--bin", env!("CARGO_BIN_EXE_infotrack"), "--out"])
-            .arg(out)
-            .args(["--set", "stand-ins", "--runs", "1", "--duration", "20"])
-            .args(["--seed", "2", "--key", key])
-            .output()
-            .unwrap()
-    };
+    let batch = |out: &Path, key: &str| stand_in_batch(out, "20", &["--key", key]);
     let o = batch(&out, "guidance.view_heading=\"informed\"");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary = read_json(&out.join("summary.json"));
@@ -593,16 +582,97 @@ fn world_batch_flies_a_config_variant_from_a_key() {
     );
 
     // A key the world sets already is refused, naming the key and the world.
-    let o = batch(&dir.path().join("twice"), "guidance.horizon_steps=3");
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = refused(batch(&dir.path().join("twice"), "guidance.horizon_steps=3"));
     assert!(
         err.contains("guidance.horizon_steps") && err.contains("already sets it"),
         "{err}"
     );
     // Not SECTION.KEY=VALUE.
-    let o = batch(&dir.path().join("bad"), "informed");
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = refused(batch(&dir.path().join("bad"), "informed"));
     assert!(err.contains("expected SECTION.KEY=VALUE"), "{err}");
+}
+
+/// `scripts/world-batch.py --scale SECTION.KEY=FACTOR` multiplies a number every world sets,
+/// in copies it flies (a diagnostic of what a world's own setting decides), records the
+/// factor in the summary, and refuses a key a world does not set and a factor that is no
+/// number, naming what was wrong.
+#[test]
+fn world_batch_scales_a_number_every_world_sets() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let batch = |out: &Path, scale: &str| stand_in_batch(out, "5", &["--scale", scale]);
+    let out = dir.path().join("agile");
+    let o = batch(&out, "agent.accel_limit_mps2=2");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary = read_json(&out.join("summary.json"));
+    assert_eq!(summary["scales"][0], "agent.accel_limit_mps2=2");
+    for world in ["field-grid", "field-town"] {
+        let shipped: toml::Table =
+            std::fs::read_to_string(root.join(format!("config/{world}.toml")))
+                .unwrap()
+                .parse()
+                .unwrap();
+        let copy = out.join(format!("worlds/{world}.toml"));
+        let scaled: toml::Table = std::fs::read_to_string(&copy).unwrap().parse().unwrap();
+        let accel = |t: &toml::Table| t["agent"]["accel_limit_mps2"].as_float().unwrap();
+        assert_eq!(accel(&scaled), 2.0 * accel(&shipped), "{world}");
+        // Nothing else in the world changed.
+        let mut back = scaled.clone();
+        back["agent"]
+            .as_table_mut()
+            .unwrap()
+            .insert("accel_limit_mps2".into(), accel(&shipped).into());
+        assert_eq!(back, shipped, "{world}");
+        assert_eq!(
+            summary["worlds"][world]["config"].as_str(),
+            Some(copy.to_str().unwrap())
+        );
+    }
+
+    // A key no world sets, and a factor that is not a number, are refused.
+    let err = refused(batch(
+        &dir.path().join("unset"),
+        "guidance.search_commitment=2",
+    ));
+    assert!(
+        err.contains("guidance.search_commitment") && err.contains("does not set it"),
+        "{err}"
+    );
+    let err = refused(batch(
+        &dir.path().join("nan"),
+        "agent.accel_limit_mps2=fast",
+    ));
+    assert!(err.contains("expected SECTION.KEY=FACTOR"), "{err}");
+}
+
+/// The stderr of a run that must have failed (a batch refusing its arguments).
+fn refused(o: std::process::Output) -> String {
+    assert!(
+        !o.status.success(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// `scripts/world-batch.py run` on the stand-ins, one run of `duration_s` each on seed 2, with
+/// `extra` arguments, into `out`.
+fn stand_in_batch(out: &Path, duration_s: &str, extra: &[&str]) -> std::process::Output {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/world-batch.py");
+    Command::new("python3")
+        .arg(script)
+        .args(["run", "--bin", env!("CARGO_BIN_EXE_infotrack"), "--out"])
+        .arg(out)
+        .args([
+            "--set",
+            "stand-ins",
+            "--runs",
+            "1",
+            "--duration",
+            duration_s,
+        ])
+        .args(["--seed", "2"])
+        .args(extra)
+        .output()
+        .unwrap()
 }
