@@ -92,19 +92,29 @@ def parse_key(text):
     return section, key.strip(), value.strip()
 
 
+def section_and_key(lines, section, key):
+    """Where `[section]` starts in the world's `lines` and the line inside it that sets `key`;
+    either None when absent."""
+    header = f"[{section}]"
+    start = next((i for i, l in enumerate(lines) if l.strip() == header), None)
+    if start is None:
+        return None, None
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
+    at = next((i for i in range(start + 1, end) if lines[i].split("=")[0].strip() == key and "=" in lines[i]), None)
+    return start, at
+
+
 def with_keys(name, text, keys):
     """The world's TOML text with each (section, key, value) set: inserted under the section's
     header, or the section appended when the world has none. Exits when the world already sets
     the key (a variant must not silently replace a world's own value)."""
     lines = text.splitlines()
     for section, key, value in keys:
-        header = f"[{section}]"
-        start = next((i for i, l in enumerate(lines) if l.strip() == header), None)
+        start, at = section_and_key(lines, section, key)
         if start is None:
-            lines += ["", header, f"{key} = {value}"]
+            lines += ["", f"[{section}]", f"{key} = {value}"]
             continue
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
-        if any(l.split("=")[0].strip() == key for l in lines[start + 1 : end] if "=" in l):
+        if at is not None:
             sys.exit(f"--key {section}.{key}: world {name} already sets it")
         lines.insert(start + 1, f"{key} = {value}")
     return "\n".join(lines) + "\n"
@@ -128,14 +138,7 @@ def with_scales(name, text, scales):
     factor. Exits when the world does not set the key to one number."""
     lines = text.splitlines()
     for section, key, factor in scales:
-        header = f"[{section}]"
-        start = next((i for i, l in enumerate(lines) if l.strip() == header), None)
-        end = len(lines) if start is None else next(
-            (i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines)
-        )
-        at = None if start is None else next(
-            (i for i in range(start + 1, end) if "=" in lines[i] and lines[i].split("=")[0].strip() == key), None
-        )
+        _, at = section_and_key(lines, section, key)
         if at is None:
             sys.exit(f"--scale {section}.{key}: world {name} does not set it")
         value = lines[at].split("=", 1)[1].split("#")[0].strip()

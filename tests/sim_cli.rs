@@ -643,6 +643,12 @@ fn world_batch_scales_a_number_every_world_sets() {
         "agent.accel_limit_mps2=fast",
     ));
     assert!(err.contains("expected SECTION.KEY=FACTOR"), "{err}");
+    // A key the world sets to something other than one number (the start, a pair).
+    let err = refused(batch(&dir.path().join("pair"), "agent.start_enu_m=2"));
+    assert!(
+        err.contains("agent.start_enu_m") && err.contains("not one number"),
+        "{err}"
+    );
 }
 
 /// The stderr of a run that must have failed (a batch refusing its arguments).
