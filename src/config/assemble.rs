@@ -3,6 +3,7 @@
 
 use super::{Config, SpeedLimitShape};
 use crate::estimation::{FilterParams, KalmanParams};
+use crate::guidance::ambush::{AmbushParams, DEFAULT_AMBUSH_WINDOW_S};
 use crate::guidance::eer::{
     DEFAULT_CENTRING_SHARE, DEFAULT_SEARCH_COMMITMENT, DEFAULT_SEARCH_ESCAPE_FLOOR,
 };
@@ -141,6 +142,15 @@ impl Config {
         }
     }
 
+    /// The ambush's parameters (`guidance.ambush_window_s`).
+    pub fn ambush_params(&self) -> AmbushParams {
+        AmbushParams::new(
+            self.guidance
+                .ambush_window_s
+                .unwrap_or(DEFAULT_AMBUSH_WINDOW_S),
+        )
+    }
+
     /// The Kalman filter's parameters.
     pub fn kalman_params(&self) -> KalmanParams {
         KalmanParams {
@@ -231,6 +241,7 @@ impl Config {
             lawn: self.guidance.lawn.clone(),
             failsafe: failsafe.then(|| self.failsafe()),
             cue: self.cue_region(),
+            ambush: self.ambush_params(),
             cue_prior: self
                 .acquisition
                 .as_ref()

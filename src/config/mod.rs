@@ -578,6 +578,14 @@ pub struct GuidanceConfig {
     /// (0.1 before session 48, part 46); 1 restores the paper's. Without a cue (the lab), never applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_escape_floor: Option<f64>,
+    /// Waiting where a long-lost target will pass: once the target has been unseen for 40 s
+    /// and the belief is spread over more than two views' lengths, the drone flies to the
+    /// point along the roads that the most hypotheses, driven on along the roads, pass in
+    /// this many seconds after it gets there, per second of flight and wait, and waits there
+    /// (`guidance::ambush`; BENCHMARKS "Field scale, part 68"). Optional; absent, 30 s; 0:
+    /// off (EER searches, as before session 69). Without a cue (the lab), never applied.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambush_window_s: Option<f64>,
     /// Which way the camera's image faces: `north` (the paper's constant heading, the image's
     /// width along world east), `along_track` (the image's width, its long side, along the
     /// direction of travel, a chased car's road; the vehicle turns at

@@ -470,3 +470,27 @@ fn a_yaw_rate_limit_that_is_not_positive_is_refused() {
     .unwrap();
     assert_eq!(ok.agent.yaw_rate_limit_rad_s(), 1.0);
 }
+
+/// `guidance.ambush_window_s` is optional (absent: 30 s, on), 0 turns the ambush off, and a
+/// negative or non-finite window is an error naming the key.
+#[test]
+fn the_ambush_window_is_optional_and_a_bad_one_is_named() {
+    let c = Config::default_lab();
+    assert_eq!(c.guidance.ambush_window_s, None);
+    let p = c.ambush_params();
+    assert_eq!(p.window_s, crate::guidance::ambush::DEFAULT_AMBUSH_WINDOW_S);
+    assert!(p.is_on());
+    let off = load_modified(|t| {
+        tbl(t, "guidance").insert("ambush_window_s".into(), 0.0.into());
+    })
+    .unwrap();
+    assert!(!off.ambush_params().is_on());
+    for bad in [-1.0, f64::NAN, f64::INFINITY] {
+        let msg = load_modified(|t| {
+            tbl(t, "guidance").insert("ambush_window_s".into(), bad.into());
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(msg.contains("guidance.ambush_window_s"), "{msg}");
+    }
+}

@@ -260,6 +260,9 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
             ));
         }
     }
+    if let Some(t) = g.ambush_window_s {
+        non_negative("guidance.ambush_window_s", t)?;
+    }
     if let Some(floor) = g.search_escape_floor {
         in_unit("guidance.search_escape_floor", floor)?;
     }

@@ -8,6 +8,7 @@
 //!
 //! Every waypoint is clamped to the geofence before it leaves this module.
 
+pub mod ambush;
 pub mod eer;
 pub mod entropy;
 pub mod lawn;

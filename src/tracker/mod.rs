@@ -133,6 +133,8 @@ pub struct TrackerParams {
     pub motion: MotionParams,
     /// EER.
     pub eer: EerParams,
+    /// Waiting where a long-lost target will pass ([`crate::guidance::ambush`]).
+    pub ambush: crate::guidance::ambush::AmbushParams,
     /// The lawnmower sweep (`lawn` guidance and the `lawn` fallback).
     pub lawn: LawnConfig,
     /// Failsafes; `None`: none, and any failure is an error.
@@ -229,6 +231,8 @@ pub struct Tracker {
     /// How many times the belief was spread again in the current spell without
     /// measurements.
     respreads_in_spell: u32,
+    /// The ambush point in force ([`crate::guidance::ambush`]).
+    ambush_point_enu: Option<Enu2>,
     /// The estimate's speed at the last step with a measurement, m/s.
     last_seen_speed_mps: f64,
     /// The speeds measured over the last [`CRUISE_WINDOW_S`] (time, m/s), oldest first.
@@ -299,6 +303,7 @@ impl Tracker {
             last_eer: f64::NAN,
             planned_view_yaw_enu_rad: None,
             respreads_in_spell: 0,
+            ambush_point_enu: None,
             last_seen_speed_mps: 0.0,
             recent_speeds: std::collections::VecDeque::new(),
             last_seen_velocity_enu: Enu2::zeros(),

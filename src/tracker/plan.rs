@@ -79,7 +79,7 @@ impl Tracker {
             }
         }
         Ok(match self.params.guidance {
-            GuidanceKind::Eer => Some(self.plan_eer(vehicle)?),
+            GuidanceKind::Eer => Some(self.plan_eer(vehicle, t_s)?),
             GuidanceKind::Pfwm => Some((self.estimator.mean(), self.confident_velocity())),
             GuidanceKind::Kf => match &self.side_kf {
                 Some(k) => Some((k.mean(), k.velocity())),
@@ -108,7 +108,7 @@ impl Tracker {
     /// EER's waypoint is where to be at the end of the horizon; with the target's velocity
     /// (when the belief is concentrated) the setpoint moves so as to get there then, riding
     /// along with the target instead of trailing it.
-    fn plan_eer(&mut self, vehicle: &View) -> Result<(Enu2, Enu2), TrackerError> {
+    fn plan_eer(&mut self, vehicle: &View, t_s: f64) -> Result<(Enu2, Enu2), TrackerError> {
         let vehicle_enu = &vehicle.centre_enu;
         let over_target_velocity_enu = self.confident_velocity();
         let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
@@ -149,6 +149,9 @@ impl Tracker {
         )?;
         self.entropy = d.h_now;
         self.last_eer = d.eer;
+        if let Some(command) = self.ambush_command(vehicle, t_s, horizon_s) {
+            return Ok(command);
+        }
         let velocity_enu = if over_target_velocity_enu == Enu2::zeros() {
             approach_velocity(
                 vehicle_enu,
@@ -173,6 +176,63 @@ impl Tracker {
             }
         }
         Ok((d.waypoint_enu - velocity_enu * horizon_s, velocity_enu))
+    }
+
+    /// While the target has been unseen for `ambush.after_s` and the belief is spread over
+    /// more than two views' lengths, in a world with a cue: the setpoint toward the point
+    /// where most hypotheses will pass ([`crate::guidance::ambush`]), at rest once there.
+    fn ambush_command(&mut self, vehicle: &View, t_s: f64, horizon_s: f64) -> Option<(Enu2, Enu2)> {
+        let params = self.params.ambush;
+        let unseen_s = t_s - self.last_measurement.map_or(0.0, |(tm, _)| tm);
+        let fp = &self.world.footprint;
+        let long_side_m = 2.0 * fp.half_width_m.max(fp.half_height_m);
+        let spread = self.estimator.largest_sd_m() > 2.0 * long_side_m;
+        if self.params.cue.is_none()
+            || !params.is_on()
+            || unseen_s < params.after_s
+            || !spread
+            || horizon_s <= 0.0
+        {
+            self.ambush_point_enu = None;
+            return None;
+        }
+        let Estimator::Particle { pf, .. } = &self.estimator else {
+            return None;
+        };
+        let dt_s = self.params.filter.dt_s;
+        let belief: Vec<crate::guidance::ambush::Hypothesis> = (0..pf.weights().len())
+            .map(|i| crate::guidance::ambush::Hypothesis {
+                position_enu: pf.particle(i),
+                velocity_enu: crate::estimation::road_following::track_velocity(
+                    pf.histories(),
+                    i,
+                    dt_s,
+                ),
+                weight: pf.weights()[i],
+            })
+            .collect();
+        let vehicle_enu = vehicle.centre_enu;
+        let point = crate::guidance::ambush::choose(
+            &params,
+            &belief,
+            &self.world,
+            &vehicle_enu,
+            self.params.eer.reach_m / horizon_s,
+            self.ambush_point_enu,
+            self.params.eer.search_commitment,
+            &mut self.rng_guidance,
+        )?;
+        self.ambush_point_enu = Some(point.point_enu);
+        let c = point.point_enu;
+        let reach_m = self.params.eer.reach_m;
+        if (c - vehicle_enu).norm() <= reach_m {
+            return Some((c, Enu2::zeros()));
+        }
+        if let Some(along) = self.along_the_roads(&vehicle_enu, &c, horizon_s) {
+            return Some(along);
+        }
+        let v = (c - vehicle_enu).normalize() * (reach_m / horizon_s);
+        Some((c - v * horizon_s, v))
     }
 
     /// In a world with a cue (a field flight), a far waypoint (beyond the reachable region,

@@ -904,3 +904,43 @@ fn after_a_loss_a_far_waypoint_is_flown_to_along_the_roads() {
         "{velocity_enu}"
     );
 }
+
+/// Never seen from a cue, with the camera looking elsewhere: EER decides until the target
+/// has been unseen for `AMBUSH_AFTER_S`, then the drone is sent to a point on the roads
+/// (and, with `guidance.ambush_window_s = 0`, EER goes on deciding). field-grid flown at
+/// half its altitude, so that its belief is spread over two views' lengths before then.
+#[test]
+fn a_long_unseen_target_is_waited_for_on_the_roads() {
+    let after_s = crate::guidance::ambush::AMBUSH_AFTER_S;
+    let elsewhere = Enu2::new(1100.0, -150.0);
+    let unseen_for = |c: &Config, for_s: f64| {
+        let dt = 1.0 / c.timing.filter_hz;
+        let mut t = tracker(c, GuidanceKind::Eer, false);
+        let mut t_s = 0.0;
+        while t_s < for_s {
+            t_s += dt;
+            frame(&mut t, t_s, elsewhere, None);
+        }
+        t.decide(t_s, &View::north(elsewhere), None, &FrozenClock)
+            .unwrap();
+        t
+    };
+    let mut c = field_grid();
+    c.agent.altitude_m *= 0.5;
+    let fp = c.world().footprint;
+    let two_views_m = 4.0 * fp.half_width_m.max(fp.half_height_m);
+    let before = unseen_for(&c, after_s - 5.0);
+    assert!(before.estimator().largest_sd_m() > two_views_m);
+    assert_eq!(before.ambush_point_enu, None, "not unseen for long enough");
+    let after = unseen_for(&c, after_s + 5.0);
+    let point = after.ambush_point_enu.expect("an ambush point");
+    assert!(c.world().road.distance_to_roads(&point) < 1e-6, "{point:?}");
+    let Some(Command::GoTo { position_enu, .. }) = after.command() else {
+        panic!("a go-to, got {:?}", after.command());
+    };
+    // The setpoint heads for the point (along the roads or straight).
+    assert!((position_enu - point).norm() < (elsewhere - point).norm());
+    let mut off = c.clone();
+    off.guidance.ambush_window_s = Some(0.0);
+    assert_eq!(unseen_for(&off, after_s + 5.0).ambush_point_enu, None);
+}
