@@ -10,9 +10,12 @@
 //! accelerates at 4 m/s^2 along it, where a head-on pass at speed loses it.
 //!
 //! So: hypotheses drawn from the belief by weight drive on along the roads at their own
-//! speed for `window_s`; each candidate point along the roads scores the hypotheses that
-//! pass within the view's inscribed radius of it after the drone can be there, each at its
-//! first pass, discounted by `1 - t / 2T`. Pure and seeded.
+//! speed for `flight_s + window_s`; each candidate point along the roads (one view radius
+//! apart) scores the share of them that pass within the view's inscribed radius of it, not
+//! under an occlusion, in the `window_s` after the drone can be there, divided by that
+//! flight plus the wait: a rate, so that a far point is worth its flight (a window from now
+//! instead kept the drone at the nearest hub for minutes, BENCHMARKS.md part 68). Pure and
+//! seeded.
 
 use rand::Rng;
 
@@ -32,7 +35,7 @@ pub const AMBUSH_AFTER_S: f64 = 40.0;
 /// The ambush's parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AmbushParams {
-    /// How far ahead the hypotheses drive, s; 0: off.
+    /// How long a waiting point is judged over once the drone can be there, s; 0: off.
     pub window_s: f64,
     /// Unseen for this long (since the start or the last measurement) before it applies, s.
     pub after_s: f64,
@@ -80,7 +83,8 @@ pub struct Hypothesis {
 pub struct AmbushPoint {
     /// Where to wait, world ENU.
     pub point_enu: Enu2,
-    /// The discounted share of the drawn hypotheses it sees.
+    /// The share of the drawn hypotheses it sees in its window, per second of the flight
+    /// there and the wait.
     pub score: f64,
 }
 
