@@ -18,7 +18,7 @@ printf '%s\n\n[daemon]\ntakeoff_timeout_s = 120.0\nconnect_timeout_s = 60.0\nmoc
   "$(cat config/default.toml)" > "$lab"
 summary() { python3 -c "import json,sys; s=json.load(open(sys.argv[1])); print(f\"{s['tracking_error_m']:.3f} {s['fov_percent']:.1f}\")" "$1/summary.json"; }
 fly() { # fly NAME VEHICLE
-  ./target/release/infotrack run --quiet --vehicle "$2" --duration 60 --config "$lab" --out "$tmp/$1" \
+  ./target/release/infotrack run --quiet --allow-simulation-on-vehicle --allow-auto-engage --vehicle "$2" --duration 60 --config "$lab" --out "$tmp/$1" \
     > "$tmp/$1.log" 2>&1 || { echo "$1 failed:"; tail -5 "$tmp/$1.log"; return 1; }
   echo "$1 $(summary "$tmp/$1")" | tee -a "$tmp/results"
 }

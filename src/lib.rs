@@ -19,6 +19,7 @@
 #![deny(missing_docs)]
 
 pub mod autopilot;
+pub mod bounded_file;
 pub mod config;
 pub mod daemon;
 pub mod estimation;

@@ -95,16 +95,16 @@ struct MockArgs {
     #[arg(long)]
     params: Option<PathBuf>,
     /// Drop this share of messages in both directions, percent.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = numbers::percent)]
     loss: f64,
     /// One-way latency added to every message, milliseconds.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = numbers::millis)]
     delay_ms: f64,
     /// Deliver this share of messages twice, percent.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = numbers::percent)]
     duplicate: f64,
     /// Hold back this share of messages so that later ones overtake them, percent.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = numbers::percent)]
     reorder: f64,
     /// MAVLink 2 signing key file (64 hex digits): sign everything and refuse unsigned
     /// frames.
@@ -118,7 +118,7 @@ struct MockArgs {
     #[arg(long, default_value = "sitl", value_parser = ["sitl", "ideal"])]
     response: String,
     /// Seconds after start before arming is allowed (the estimator settling).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = numbers::seconds)]
     estimator_ready_after: f64,
 }
 
@@ -132,7 +132,7 @@ struct ParamsArgs {
     #[arg(long)]
     connect: String,
     /// Seconds to wait for the vehicle's heartbeat.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = numbers::timeout_seconds)]
     timeout: f64,
     /// MAVLink 2 signing key file (64 hex digits) for a vehicle with signing on.
     #[arg(long)]
@@ -145,7 +145,7 @@ struct DatasetArgs {
     #[arg(long)]
     config: Option<PathBuf>,
     /// Seconds of target motion to record.
-    #[arg(long, default_value_t = 1800.0)]
+    #[arg(long, default_value_t = 1800.0, value_parser = numbers::seconds)]
     duration: f64,
     /// Seed (default: the config's `seed`).
     #[arg(long)]
@@ -166,13 +166,13 @@ struct SimArgs {
     #[arg(long)]
     config: Option<PathBuf>,
     /// Runs per guidance x motion combination (default 10; with --closed-loop, 1).
-    #[arg(long)]
+    #[arg(long, value_parser = numbers::runs)]
     runs: Option<u64>,
     /// Seed of every random choice (default: the config's `seed`).
     #[arg(long)]
     seed: Option<u64>,
     /// Seconds per run (default: the config's timing.duration_s, 90 s in the paper's scenario).
-    #[arg(long)]
+    #[arg(long, value_parser = numbers::seconds)]
     duration: Option<f64>,
     /// Guidance laws, comma-separated, of eer, pfwm, lawn, kf, truth (default
     /// eer,pfwm,lawn,kf; with --closed-loop only eer flies).
@@ -189,7 +189,7 @@ struct SimArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Worker threads (default: one per core).
-    #[arg(long)]
+    #[arg(long, value_parser = numbers::threads)]
     threads: Option<usize>,
     /// No progress bar.
     #[arg(long)]
@@ -209,7 +209,7 @@ struct SimArgs {
 #[derive(clap::Args)]
 struct BenchArgs {
     /// Repetitions per median.
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = 300, value_parser = numbers::repetitions)]
     repetitions: usize,
     /// Seed of the fixtures.
     #[arg(long, default_value_t = 1)]
@@ -233,7 +233,7 @@ struct BenchArgs {
 
 mod cli;
 
-use cli::{calibrate, detect, run_cmd};
+use cli::{calibrate, detect, numbers, run_cmd};
 
 /// Keeps freed heap memory in the process instead of handing it back to the kernel after
 /// every frame. The renderer and the AprilTag detector allocate and free ~10 MB of image
@@ -345,6 +345,8 @@ fn sim_closed_loop(a: SimArgs) -> Result<()> {
         records_dir: a.out.clone(),
         status_line: false,
         faults: Vec::new(),
+        // The simulated clock refuses anything but the in-process mock.
+        permits: Default::default(),
     };
     run_cmd::fly(&cfg, &opts, a.out.as_deref(), run_cmd::Clock::Simulated)
 }
@@ -639,9 +641,22 @@ fn params(a: ParamsArgs) -> Result<()> {
         if let (false, Some(why)) = (params_sync::all_ok(&rows), l.signing_diagnosis()) {
             bail!("{file_name}: {why}");
         }
-        let untouched = rows
-            .iter()
-            .any(|r| r.status == params_sync::ParamStatus::NotWritten);
+        use params_sync::ParamStatus;
+        if let Some(failed) = rows.iter().find(|r| r.status == ParamStatus::Failed) {
+            let count = |s: ParamStatus| rows.iter().filter(|r| r.status == s).count();
+            bail!(
+                "{file_name}: writing {} (line {}) failed midway: {} parameter(s) written before \
+                 were set back to their earlier values{}; the rest were not written (see the table)",
+                failed.name,
+                failed.line,
+                count(ParamStatus::RolledBack),
+                match count(ParamStatus::RollbackFailed) {
+                    0 => String::new(),
+                    n => format!(", {n} could NOT be set back and hold the file's values"),
+                }
+            );
+        }
+        let untouched = rows.iter().any(|r| r.status == ParamStatus::NotWritten);
         if untouched {
             bail!(
                 "{file_name}: nothing was written: the file is applied whole or not at all, and the vehicle lacks some of its parameters or cannot hold their values (see the table)"

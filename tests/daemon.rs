@@ -29,6 +29,11 @@ fn opts(duration_s: f64, tlog: Option<std::path::PathBuf>) -> RunOptions {
         records_dir: None,
         status_line: false,
         faults: vec![],
+        // The tests fly a separate mock process over a MAVLink URL, as a SITL would be.
+        permits: daemon::VehiclePermits {
+            simulation: true,
+            auto_engage: true,
+        },
     }
 }
 
@@ -449,7 +454,15 @@ fn fault_specs_parse_with_clear_errors() {
 async fn sigterm_leaves_the_vehicle_in_hold() {
     let (mock, port) = udp_mock(MockConfig::new(Flavor::ArduPilot)).await;
     let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
-        .args(["run", "--quiet", "--duration", "120", "--vehicle"])
+        .args([
+            "run",
+            "--quiet",
+            "--duration",
+            "120",
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
+            "--vehicle",
+        ])
         .arg(format!("udpout:127.0.0.1:{port}"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(std::process::Stdio::piped())
@@ -505,7 +518,11 @@ async fn sigkill_mid_flight_leaves_parseable_records_up_to_the_last_second() {
             "--out",
         ])
         .arg(&out)
-        .arg("--vehicle")
+        .args([
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
+            "--vehicle",
+        ])
         .arg(format!("udpout:127.0.0.1:{port}"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(std::process::Stdio::null())
@@ -563,7 +580,13 @@ async fn sigkill_mid_flight_leaves_parseable_records_up_to_the_last_second() {
 async fn sigterm_during_takeoff_holds_and_says_so() {
     let (mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
     let child = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
-        .args(["run", "--quiet", "--vehicle"])
+        .args([
+            "run",
+            "--quiet",
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
+            "--vehicle",
+        ])
         .arg(format!("udpout:127.0.0.1:{port}"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stderr(std::process::Stdio::piped())
@@ -628,7 +651,12 @@ fn bad_starts_give_clear_errors() {
         ),
     )
     .unwrap();
-    let e = run(&["--config", cfg.to_str().unwrap()]);
+    let e = run(&[
+        "--config",
+        cfg.to_str().unwrap(),
+        "--allow-simulation-on-vehicle",
+        "--allow-auto-engage",
+    ]);
     assert!(e.contains("no autopilot heartbeat"), "{e}");
     // A real vehicle cannot fly on the simulated clock.
     let out = Command::new(env!("CARGO_BIN_EXE_infotrack"))

@@ -37,7 +37,11 @@ fn run_until_stopped(cfg: &Path, port: u16, out: Option<&Path>) -> tokio::proces
         "--config",
     ])
     .arg(cfg)
-    .arg("--vehicle")
+    .args([
+        "--allow-simulation-on-vehicle",
+        "--allow-auto-engage",
+        "--vehicle",
+    ])
     .arg(format!("udpout:127.0.0.1:{port}"))
     .current_dir(root())
     .stdout(std::process::Stdio::piped())

@@ -187,7 +187,11 @@ async fn a_second_vehicle_and_nan_poses_on_the_wire_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let out = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
         .args(["run", "--quiet", "--duration", "12", "--motion", "cv"])
-        .arg("--vehicle")
+        .args([
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
+            "--vehicle",
+        ])
         .arg(format!("udpout:127.0.0.1:{front}"))
         .arg("--out")
         .arg(dir.path())
@@ -277,7 +281,11 @@ async fn a_full_disk_is_said_to_the_log_and_the_gcs_and_the_flight_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let mut cmd = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"));
     cmd.args(["run", "--quiet", "--duration", "25", "--motion", "cv"])
-        .arg("--vehicle")
+        .args([
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
+            "--vehicle",
+        ])
         .arg(format!("udpout:127.0.0.1:{front}"))
         .arg("--out")
         .arg(dir.path())
@@ -347,9 +355,17 @@ fn a_signing_mismatch_is_named_both_ways() {
     let _mock = mock_process("px4", port, Some(&vehicle_key));
     let fly = |config: Option<PathBuf>| {
         let mut c = Command::new(env!("CARGO_BIN_EXE_infotrack"));
-        c.args(["run", "--quiet", "--duration", "5", "--vehicle"])
-            .arg(format!("udpout:127.0.0.1:{port}"))
-            .current_dir(root());
+        c.args([
+            "run",
+            "--quiet",
+            "--duration",
+            "5",
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
+            "--vehicle",
+        ])
+        .arg(format!("udpout:127.0.0.1:{port}"))
+        .current_dir(root());
         if let Some(cfg) = config {
             c.arg("--config").arg(cfg);
         }
@@ -440,7 +456,13 @@ async fn a_pipeline_that_dies_in_flight_leaves_the_vehicle_in_hold() {
         let (mock, port) = udp_mock(MockConfig::new(flavor)).await;
         let out = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
             .args(["run", "--quiet", "--duration", "60", "--motion", "cv"])
-            .args(["--inject", "pipeline-panic@3+1", "--vehicle"])
+            .args([
+                "--inject",
+                "pipeline-panic@3+1",
+                "--allow-simulation-on-vehicle",
+                "--allow-auto-engage",
+                "--vehicle",
+            ])
             .arg(format!("udpout:127.0.0.1:{port}"))
             .current_dir(root())
             .output()

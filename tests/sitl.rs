@@ -148,6 +148,9 @@ fn fly_world(vehicle: &str, seconds: u32, name: &str) -> Flight {
             "--quiet",
             "--log",
             "info",
+            // SITL is a real autopilot flying the simulated world on purpose.
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
             "--vehicle",
             vehicle,
             "--duration",

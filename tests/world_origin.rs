@@ -30,7 +30,11 @@ async fn fly_logged(cfg: &Path, port: u16, out: Option<&Path>) -> std::process::
     }
     cmd.args(["--quiet", "--duration", "3", "--motion", "cv", "--config"])
         .arg(cfg)
-        .arg("--vehicle")
+        .args([
+            "--allow-simulation-on-vehicle",
+            "--allow-auto-engage",
+            "--vehicle",
+        ])
         .arg(format!("udpout:127.0.0.1:{port}"))
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()

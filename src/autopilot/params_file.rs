@@ -86,7 +86,9 @@ impl ParamType {
     pub fn accepts(self, v: f64) -> bool {
         let int_in = |lo: f64, hi: f64| v.fract() == 0.0 && v >= lo && v <= hi;
         match self {
-            Self::Real32 => v.is_finite(),
+            // Finite as f64 is not enough: 1e308 or 3.5e38 become infinite as the f32 on the
+            // wire.
+            Self::Real32 => v.is_finite() && (v as f32).is_finite(),
             Self::Uint8 => int_in(0.0, u8::MAX as f64),
             Self::Int8 => int_in(i8::MIN as f64, i8::MAX as f64),
             Self::Uint16 => int_in(0.0, u16::MAX as f64),
@@ -183,11 +185,24 @@ fn check_name(path: &Path, line: usize, name: &str) -> Result<(), ParamFileError
     }
 }
 
+/// A parameter file longer than this is refused: ArduCopter has ~1,400 parameters, PX4
+/// ~1,500, and a file names each once.
+pub const MAX_LINES: usize = 20_000;
+/// A parameter file larger than this is refused, bytes.
+pub const MAX_BYTES: u64 = 2 << 20;
+
 /// Reads a parameter file; the format follows from the extension.
 pub fn read(path: &Path) -> Result<Vec<FileParam>, ParamFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ParamFileError::Io {
-        path: path.to_path_buf(),
-        source,
+    let text = crate::bounded_file::read_text(path, MAX_BYTES).map_err(|e| match e {
+        crate::bounded_file::BoundedReadError::Io(source) => ParamFileError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        other => ParamFileError::Line {
+            path: path.to_path_buf(),
+            line: 0,
+            message: other.to_string(),
+        },
     })?;
     let format = ParamFormat::from_path(path).ok_or_else(|| ParamFileError::Line {
         path: path.to_path_buf(),
@@ -208,7 +223,18 @@ pub fn parse(
     // Editors on Windows write a byte-order mark and CRLF line ends (`lines` drops the CR).
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut out: Vec<FileParam> = Vec::new();
+    // Name -> first line: the duplicate check is a lookup, not a scan of every earlier line.
+    let mut seen: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
     for (i, raw) in text.lines().enumerate() {
+        if i >= MAX_LINES {
+            return Err(ParamFileError::Line {
+                path: origin.to_path_buf(),
+                line: i + 1,
+                message: format!(
+                    "more than {MAX_LINES} lines: no autopilot has that many parameters (the wrong file?)"
+                ),
+            });
+        }
         let line = i + 1;
         let err = |message: String| ParamFileError::Line {
             path: origin.to_path_buf(),
@@ -274,11 +300,8 @@ pub fn parse(
                 )));
             }
         }
-        if let Some(prev) = out.iter().find(|p| p.name == name) {
-            return Err(err(format!(
-                "{name} is set again (first on line {})",
-                prev.line
-            )));
+        if let Some(first) = seen.insert(name.clone(), line) {
+            return Err(err(format!("{name} is set again (first on line {first})")));
         }
         out.push(FileParam {
             name,

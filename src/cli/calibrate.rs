@@ -31,7 +31,7 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = 20)]
     frames: usize,
     /// From a camera: seconds between two views.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::numbers::seconds)]
     every_s: f64,
 }
 

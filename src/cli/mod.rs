@@ -6,4 +6,5 @@ pub mod bench;
 pub mod calibrate;
 pub mod detect;
 pub mod detect_bench;
+pub mod numbers;
 pub mod run_cmd;

@@ -19,7 +19,7 @@ pub struct RunArgs {
     config: Option<PathBuf>,
     /// Seconds of tracking after takeoff (default: the config's timing.duration_s); 0: until
     /// SIGINT/SIGTERM.
-    #[arg(long)]
+    #[arg(long, value_parser = super::numbers::seconds)]
     duration: Option<f64>,
     /// Folder for the logs (per-step CSV, MAVLink .tlog, plots, summary JSON), written as
     /// the flight goes; an existing one is overwritten (scripts, tests).
@@ -46,6 +46,14 @@ pub struct RunArgs {
     /// pipeline-panic (the tracker thread dies; the vehicle must end in hold). Repeatable.
     #[arg(long)]
     inject: Vec<daemon::ScheduledFault>,
+    /// Fly a simulation (the synthetic camera's simulated target, a lab-scale world) on a
+    /// vehicle that is not the in-process mock: a SITL autopilot. Refused without it.
+    #[arg(long)]
+    allow_simulation_on_vehicle: bool,
+    /// Let infotrack arm and take off (daemon.engage = "auto") a vehicle that is not the
+    /// in-process mock. Refused without it.
+    #[arg(long)]
+    allow_auto_engage: bool,
 }
 
 fn percentile(v: &[f64], p: f64) -> f64 {
@@ -181,6 +189,10 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         records_dir: out.clone(),
         status_line: !a.quiet,
         faults: a.inject.clone(),
+        permits: daemon::VehiclePermits {
+            simulation: a.allow_simulation_on_vehicle,
+            auto_engage: a.allow_auto_engage,
+        },
     };
     fly(&cfg, &opts, out.as_deref(), Clock::Wall(rt))
 }
@@ -249,21 +261,56 @@ pub fn fly(
                 "closed loop: estimation error",
                 &steps,
             ),
-            report::write_json(&dir.join("summary.json"), &report.summary),
+            final_summary(dir, &report),
         ];
         let failed: Vec<_> = written.into_iter().filter_map(Result::err).collect();
         for e in &failed {
-            eprintln!("warning: after the flight: {e:#}");
+            eprintln!("error: after the flight: {e:#}");
+        }
+        if let Some(why) = &report.output.records_failure {
+            bail!(
+                "the flight's records in {} stopped early ({why}); the vehicle was held as usual, \
+                 and summary.json says the records are partial",
+                dir.display()
+            );
         }
         if !failed.is_empty() {
-            return Ok(());
+            bail!(
+                "{} of the flight's files could not be written in {} (see above)",
+                failed.len(),
+                dir.display()
+            );
         }
         println!(
             "wrote steps.csv, flight.csv, link.tlog, scene.png, estimation_error.png and summary.json to {}",
             dir.display()
         );
     }
+    if report.stopped_by == daemon::StopReason::OriginChanged {
+        bail!(
+            "the vehicle's GPS_GLOBAL_ORIGIN changed in flight, which would have moved the world \
+             and its geofence: tracking stopped and the vehicle was put in hold"
+        );
+    }
     Ok(())
+}
+
+/// `summary.json` at the end: whole unless the records stopped early.
+fn final_summary(dir: &std::path::Path, r: &DaemonReport) -> Result<(), report::ReportError> {
+    let partial = r
+        .output
+        .records_failure
+        .as_deref()
+        .map(|why| format!("the records stopped early: {why}"));
+    let path = dir.join("summary.json");
+    let bytes =
+        daemon::recorder::summary_json(&r.summary, partial.as_deref()).map_err(|source| {
+            report::ReportError::Json {
+                path: path.clone(),
+                source,
+            }
+        })?;
+    report::write_file(&path, &bytes)
 }
 
 fn cpu_seconds() -> f64 {
@@ -306,7 +353,9 @@ pub fn replay(a: ReplayArgs) -> Result<()> {
         None => Config::default_lab(),
     };
     let path = a.dir.join("flight.csv");
-    let text = std::fs::read_to_string(&path)
+    /// A flight log is ~100 bytes a filter step: an hour at 10 Hz is ~4 MB.
+    const MAX_FLIGHT_LOG_BYTES: u64 = 1 << 30;
+    let text = infotrack::bounded_file::read_text(&path, MAX_FLIGHT_LOG_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))?;
     let (seed, motion, steps) = flight_log::parse(&text, &path.display().to_string())?;
     let r = daemon::replay::replay(&cfg, &motion, seed, &steps)?;

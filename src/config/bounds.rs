@@ -20,6 +20,12 @@ pub const MAX_ENTROPY_PARTICLES: usize = 5_000;
 pub const MAX_MEASUREMENTS_PER_PARTICLE: usize = 64;
 /// EER horizon, filter steps.
 pub const MAX_HORIZON_STEPS: usize = 64;
+/// EER's work per plan: candidates (grid side squared) x entropy particles x measurements
+/// per particle x horizon steps. The field configs plan 256 x 1,000 x 1 x 6 = 1.5e6 in ~10 ms;
+/// each key within its own bound could multiply to 8e10, hours per plan.
+pub const MAX_EER_WORK: f64 = 1e8;
+/// Points of the lawnmower sweep (legs and turns over the point spacing).
+pub const MAX_SWEEP_POINTS: f64 = 1e6;
 /// Physics rate, Hz.
 pub const MAX_PHYSICS_HZ: f64 = 1_000.0;
 /// Filter and guidance rates, Hz.
@@ -104,6 +110,8 @@ pub(super) fn check(c: &Config) -> Result<(), ConfigError> {
         MAX_MEASUREMENTS_PER_PARTICLE,
     )?;
     at_most_usize("guidance.horizon_steps", g.horizon_steps, MAX_HORIZON_STEPS)?;
+    check_eer_work(c)?;
+    check_sweep_points(&g.lawn)?;
     let t = &c.timing;
     at_most("timing.physics_hz", t.physics_hz, MAX_PHYSICS_HZ)?;
     at_most("timing.filter_hz", t.filter_hz, MAX_LOOP_HZ)?;
@@ -144,6 +152,54 @@ pub(super) fn check(c: &Config) -> Result<(), ConfigError> {
             value: "0".into(),
             reason: "0 is MAVLink's broadcast id; use 1-255 (191: onboard computer)".into(),
         });
+    }
+    Ok(())
+}
+
+/// EER's sizes together, not only each on its own: see [`MAX_EER_WORK`].
+fn check_eer_work(c: &Config) -> Result<(), ConfigError> {
+    let g = &c.guidance;
+    let particles = g
+        .entropy_particles
+        .max(g.entropy_particles_concentrated.unwrap_or(0));
+    let work = (g.candidate_grid_side as f64).powi(2)
+        * particles as f64
+        * g.measurements_per_particle as f64
+        * g.horizon_steps as f64;
+    if work > MAX_EER_WORK {
+        return Err(too_large(
+            "guidance.entropy_particles",
+            particles,
+            format!(
+                "{MAX_EER_WORK:e} for candidate_grid_side^2 x entropy_particles x \
+                 measurements_per_particle x horizon_steps together \
+                 ({}^2 x {particles} x {} x {} = {work:e}: one plan would take minutes to hours)",
+                g.candidate_grid_side, g.measurements_per_particle, g.horizon_steps
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The sweep's point count from its legs and spacing: see [`MAX_SWEEP_POINTS`].
+fn check_sweep_points(l: &crate::guidance::lawn::LawnConfig) -> Result<(), ConfigError> {
+    let leg_m = (l.y_max_m - l.y_min_m).abs();
+    let turns_m: f64 = l
+        .legs_x_m
+        .windows(2)
+        .map(|w| 0.5 * std::f64::consts::PI * (w[1] - w[0]).abs())
+        .sum();
+    let points = (leg_m * l.legs_x_m.len() as f64 + turns_m) / l.point_spacing_m;
+    // NaN (a spacing of NaN is refused by validate first) counts as too many.
+    if points.is_nan() || points > MAX_SWEEP_POINTS {
+        return Err(too_large(
+            "guidance.lawn.point_spacing_m",
+            l.point_spacing_m,
+            format!(
+                "{MAX_SWEEP_POINTS:e} sweep points: at least {:.3e} m for these legs",
+                (leg_m * l.legs_x_m.len() as f64 + turns_m) / MAX_SWEEP_POINTS
+            ),
+        ));
     }
     Ok(())
 }

@@ -29,6 +29,14 @@ pub enum ConfigError {
         /// The OS error.
         source: std::io::Error,
     },
+    /// The file is not one to read: a device, a FIFO, too large, not text.
+    #[error("config file {path}: {source}")]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: crate::bounded_file::BoundedReadError,
+    },
     /// The file is not valid TOML, has an unknown key or a value of the wrong type.
     #[error("config file {path}: {message}")]
     Parse {
@@ -613,10 +621,9 @@ impl Config {
     /// a path found only from the current directory (how configs were read before) still
     /// works, with a warning.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        /// A config is a page or two of TOML; the largest shipped is ~10 kB.
+        const MAX_CONFIG_BYTES: u64 = 1 << 20;
+        let text = read_user_file(path, MAX_CONFIG_BYTES)?;
         let mut cfg = Self::from_toml_str(&text, path)?;
         let base = path.parent().unwrap_or(Path::new("."));
         cfg.resolve_paths(base, path);
@@ -707,3 +714,19 @@ impl Config {
 
 #[cfg(test)]
 mod tests;
+
+/// Reads a file a config names (the config itself, a world): a regular file up to `limit`
+/// bytes of UTF-8, else an error naming it.
+pub(crate) fn read_user_file(path: &Path, limit: u64) -> Result<String, ConfigError> {
+    use crate::bounded_file::{read_text, BoundedReadError};
+    read_text(path, limit).map_err(|e| match e {
+        BoundedReadError::Io(source) => ConfigError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        source => ConfigError::File {
+            path: path.to_path_buf(),
+            source,
+        },
+    })
+}

@@ -69,10 +69,9 @@ pub(super) fn merge_world_file(
     } else {
         base.join(file)
     };
-    let text = std::fs::read_to_string(&path).map_err(|source| ConfigError::Io {
-        path: path.clone(),
-        source,
-    })?;
+    /// A town's roads, woods and buildings from OpenStreetMap are a few MB of GeoJSON.
+    const MAX_WORLD_BYTES: u64 = 64 << 20;
+    let text = super::read_user_file(&path, MAX_WORLD_BYTES)?;
     let parsed = read(&text, &world_origin).map_err(|message| ConfigError::Parse {
         path: path.clone(),
         message,

@@ -56,29 +56,98 @@ pub(super) async fn connect(
     })
 }
 
-/// `[world]`: the vehicle's local origin (GPS_GLOBAL_ORIGIN, asked for once) must be known
-/// and within the tolerance of the world's before anything is commanded; the link then
-/// converts every position and setpoint between the vehicle's frame and the world's.
+/// `[world]`: the vehicle's local origin (GPS_GLOBAL_ORIGIN) must be known, agree with
+/// where the vehicle says it is (GLOBAL_POSITION_INT against the origin moved by
+/// LOCAL_POSITION_NED; HOME_POSITION, when sent, likewise) and lie within the tolerance of
+/// the world's before anything is commanded; the link then converts every position and
+/// setpoint between the vehicle's frame and the world's. Why the cross-check: an origin
+/// spoofed with the vehicle's ids during start-up would place the world, and the geofence
+/// with it, hundreds of metres off.
 pub(super) async fn check_world_origin(
     w: &crate::config::WorldConfig,
     link: &VehicleLink,
     timeout_s: f64,
 ) -> Result<(), DaemonError> {
-    const GPS_GLOBAL_ORIGIN_ID: u32 = 49;
-    if let Err(e) = link.request_message(GPS_GLOBAL_ORIGIN_ID).await {
-        // Some firmware streams it without answering the request: wait for it anyway.
-        tracing::warn!("asking for GPS_GLOBAL_ORIGIN: {e}");
-    }
     let until = Instant::now() + Duration::from_secs_f64(timeout_s);
-    let origin = loop {
-        if let Some(o) = link.state().global_origin {
-            break o;
+    let mut disagreement = None;
+    let mut asked: Option<Instant> = None;
+    loop {
+        if asked.map_or(true, |at| at.elapsed() >= Duration::from_secs(1)) {
+            ask_for_origin(link).await;
+            asked = Some(Instant::now());
+        }
+        match origin_agreement(&link.state()) {
+            Some(Ok(origin)) => return place_world(w, link, origin),
+            Some(Err(d)) => disagreement = Some(d),
+            None => {}
         }
         if Instant::now() > until {
-            return Err(DaemonError::NoVehicleOrigin(timeout_s));
+            return Err(match disagreement {
+                Some(d) => DaemonError::OriginDisagrees(d),
+                None => DaemonError::NoVehicleOrigin(timeout_s),
+            });
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// Asks for GPS_GLOBAL_ORIGIN and HOME_POSITION (again: a spoofed one may have come last).
+async fn ask_for_origin(link: &VehicleLink) {
+    const GPS_GLOBAL_ORIGIN_ID: u32 = 49;
+    const HOME_POSITION_ID: u32 = 242;
+    for id in [GPS_GLOBAL_ORIGIN_ID, HOME_POSITION_ID] {
+        if let Err(e) = link.request_message(id).await {
+            // Some firmware streams them without answering the request: wait anyway.
+            tracing::debug!("asking for message {id}: {e}");
+        }
+    }
+}
+
+/// The latest origin if it agrees with the vehicle's own position messages; `Err` says how
+/// far off it is; `None`: not all of them have arrived yet.
+fn origin_agreement(
+    s: &crate::autopilot::link::VehicleState,
+) -> Option<Result<crate::geodesy::GeodeticWgs84, String>> {
+    /// GLOBAL_POSITION_INT and LOCAL_POSITION_NED come from one estimator: they agree to
+    /// centimetres, and a vehicle on the ground moves by less than this between the two, m.
+    const AGREE_M: f64 = 5.0;
+    let origin = s.global_origin?;
+    let (_, lat_deg, lon_deg, _) = s.global?;
+    let (_, local, _) = s.local_ned?;
+    let here = crate::geodesy::GeodeticWgs84 {
+        lat_deg,
+        lon_deg,
+        alt_m: origin.alt_m,
     };
+    let implied = origin.offset_by_enu([local.y_east_m, local.x_north_m, 0.0]);
+    let off_m = implied.horizontal_distance_m(&here);
+    if off_m > AGREE_M {
+        return Some(Err(format!(
+            "GPS_GLOBAL_ORIGIN ({:.7}, {:.7}) moved by LOCAL_POSITION_NED lies {off_m:.1} m from \
+             GLOBAL_POSITION_INT ({lat_deg:.7}, {lon_deg:.7})",
+            origin.lat_deg, origin.lon_deg
+        )));
+    }
+    if let Some((home, home_local)) = s.home_position {
+        let home_origin = home.offset_by_enu([-home_local.y_east_m, -home_local.x_north_m, 0.0]);
+        let off_m = home_origin.horizontal_distance_m(&origin);
+        if off_m > AGREE_M {
+            return Some(Err(format!(
+                "GPS_GLOBAL_ORIGIN ({:.7}, {:.7}) lies {off_m:.1} m from the origin HOME_POSITION \
+                 implies ({:.7}, {:.7})",
+                origin.lat_deg, origin.lon_deg, home_origin.lat_deg, home_origin.lon_deg
+            )));
+        }
+    }
+    Some(Ok(origin))
+}
+
+/// Places the world with the vehicle's checked origin, if it is within the tolerance.
+fn place_world(
+    w: &crate::config::WorldConfig,
+    link: &VehicleLink,
+    origin: crate::geodesy::GeodeticWgs84,
+) -> Result<(), DaemonError> {
     let distance_m = w.origin.horizontal_distance_m(&origin);
     if distance_m > w.origin_tolerance_m {
         return Err(DaemonError::OriginTooFar {
@@ -94,7 +163,8 @@ pub(super) async fn check_world_origin(
     let [e, n] = placement.vehicle_origin_in_world_en_m();
     tracing::info!(
         "the vehicle's origin is {distance_m:.2} m from the world's ({e:.2} m east, {n:.2} m \
-         north of it): positions and setpoints are converted between the two frames"
+         north of it), and agrees with its GLOBAL_POSITION_INT: positions and setpoints are \
+         converted between the two frames"
     );
     link.place_in_world(placement);
     Ok(())

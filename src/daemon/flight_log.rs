@@ -169,6 +169,13 @@ pub fn parse(text: &str, path: &str) -> Result<(u64, String, Vec<LoggedStep>), F
             Err(e) => return Err(e),
         }
     }
+    if steps.is_empty() {
+        return Err(err(
+            3,
+            "no filter steps after the header: nothing to replay (the flight never tracked?)"
+                .into(),
+        ));
+    }
     Ok((seed, motion, steps))
 }
 
@@ -184,9 +191,18 @@ fn parse_row(
         if f.len() != fields {
             return Err(err(n, format!("{} fields, expected {fields}", f.len())));
         }
-        let num = |k: usize| -> Result<f64, FlightLogError> {
+        let any_num = |k: usize| -> Result<f64, FlightLogError> {
             f[k].parse::<f64>()
                 .map_err(|_| err(n, format!("field {} `{}` is not a number", k + 1, f[k])))
+        };
+        // Only the measurement may be NaN (a step without one); a NaN time, pose, estimate
+        // or command would replay as a comparison of nothing.
+        let num = |k: usize| -> Result<f64, FlightLogError> {
+            let v = any_num(k)?;
+            if !v.is_finite() {
+                return Err(err(n, format!("field {} `{}` is not finite", k + 1, f[k])));
+            }
+            Ok(v)
         };
         let flag = |k: usize| -> Result<bool, FlightLogError> {
             match f[k] {
@@ -196,7 +212,7 @@ fn parse_row(
             }
         };
         let measured = flag(8)?;
-        let z = Enu2::new(num(9)?, num(10)?);
+        let z = Enu2::new(any_num(9)?, any_num(10)?);
         if measured && !(z.x.is_finite() && z.y.is_finite()) {
             return Err(err(n, "measured, but the measurement is not finite".into()));
         }

@@ -24,6 +24,7 @@ pub mod flight_log;
 pub mod gcs_report;
 pub mod heading;
 mod options;
+pub mod permits;
 pub mod pipeline;
 pub mod pose_history;
 pub mod recorder;
@@ -32,7 +33,9 @@ mod supervisor;
 mod vehicle_speed;
 
 use airborne::{check_world_origin, connect, launch};
-pub use options::{BadFault, DaemonReport, FaultKind, RunOptions, ScheduledFault, StopReason};
+pub use options::{
+    BadFault, DaemonReport, FaultKind, RunOptions, ScheduledFault, StopReason, VehiclePermits,
+};
 use supervisor::{stop, track};
 
 use std::path::PathBuf;
@@ -112,6 +115,12 @@ pub enum DaemonError {
          the vehicle's local frame is"
     )]
     NoVehicleOrigin(f64),
+    /// The vehicle's origin does not agree with its own position messages.
+    #[error(
+        "world.origin: the vehicle's origin cannot be trusted: {0}. Nothing was commanded \
+         (an origin spoofed on the link, or an estimator that has not settled)"
+    )]
+    OriginDisagrees(String),
     /// The vehicle's origin is too far from the world's.
     #[error(
         "world.origin: the vehicle's local origin ({vehicle_lat:.7}, {vehicle_lon:.7}) is \
@@ -134,6 +143,25 @@ pub enum DaemonError {
         /// The tolerance, m.
         tolerance_m: f64,
     },
+    /// A simulation was asked to fly a vehicle that is not the in-process mock.
+    #[error(
+        "refusing to fly a simulation on `{vehicle}`, which is not the in-process mock: {what}. \
+         Nothing was sent. Fly a real vehicle with a field config (--config, a real camera), \
+         or pass --allow-simulation-on-vehicle to fly this simulation on a SITL autopilot on purpose"
+    )]
+    SimulationOnVehicle {
+        /// `daemon.vehicle`.
+        vehicle: String,
+        /// What is simulated.
+        what: String,
+    },
+    /// `daemon.engage = "auto"` on a vehicle that is not the in-process mock, not allowed.
+    #[error(
+        "refusing to arm and take off `{0}` by itself (daemon.engage = \"auto\"): nothing was \
+         sent. Use daemon.engage = \"pilot\" (the pilot takes off and hands over), or pass \
+         --allow-auto-engage to let infotrack arm and take off this vehicle"
+    )]
+    AutoEngageOnVehicle(String),
     /// The simulated-clock runtime could not be built.
     #[error("cannot build the simulated-clock runtime: {0}")]
     Runtime(std::io::Error),
@@ -270,6 +298,7 @@ pub async fn run(cfg: &Config, opts: &RunOptions) -> Result<DaemonReport, Daemon
     if cfg.daemon.engage == Engage::Pilot && cfg.daemon.vehicle.starts_with("mock:") {
         return Err(DaemonError::PilotNeedsVehicle(cfg.daemon.vehicle.clone()));
     }
+    permits::check(cfg, opts.permits)?;
     let (pipeline, channels) = start_pipeline(cfg, opts).await?;
     let mut signal = shutdown_signal();
     let vehicle = connect(cfg, opts, &mut signal).await?;

@@ -20,6 +20,20 @@ pub struct RunOptions {
     pub status_line: bool,
     /// Faults to inject during the flight (tests, demonstrations).
     pub faults: Vec<ScheduledFault>,
+    /// What the operator explicitly allowed on a vehicle that is not the in-process mock.
+    pub permits: VehiclePermits,
+}
+
+/// What the operator must say explicitly before infotrack flies a vehicle that is not the
+/// in-process mock (`mock:px4`, `mock:ardupilot`): both default to refused.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct VehiclePermits {
+    /// Fly a simulation (the synthetic camera and its simulated target, or a lab-scale
+    /// world) on it: a SITL autopilot (`--allow-simulation-on-vehicle`).
+    pub simulation: bool,
+    /// Let infotrack arm it and take off by itself (`daemon.engage = "auto"`,
+    /// `--allow-auto-engage`).
+    pub auto_engage: bool,
 }
 
 /// A fault the daemon injects into its own loop.
@@ -74,7 +88,10 @@ impl std::str::FromStr for ScheduledFault {
         let (at, dur) = when.split_once('+').ok_or_else(usage)?;
         let at_s: f64 = at.parse().map_err(|_| usage())?;
         let duration_s: f64 = dur.parse().map_err(|_| usage())?;
-        if !(at_s.is_finite() && at_s >= 0.0 && duration_s.is_finite() && duration_s > 0.0) {
+        // Within a day: a fault's end (start + duration) becomes a `Duration`, which panics
+        // on values like 1e300.
+        let day_s = crate::config::bounds::MAX_DURATION_S;
+        if !((0.0..=day_s).contains(&at_s) && duration_s > 0.0 && duration_s <= day_s) {
             return Err(usage());
         }
         let kind = match kind {
@@ -103,6 +120,9 @@ pub enum StopReason {
     Signal,
     /// An internal fault (the pipeline thread died).
     Fault,
+    /// The vehicle's GPS_GLOBAL_ORIGIN changed after the world was placed with it: the
+    /// world, and the geofence, would no longer be where they are on Earth.
+    OriginChanged,
 }
 
 /// What a run produced.

@@ -1,12 +1,13 @@
 //! The flight's records on disk as the flight goes: `steps.csv` and `flight.csv` a row per
 //! filter step, buffered and flushed at least once a second (so a SIGKILL, an abort or a
-//! power cut loses at most the last second, and every file parses up to its last complete
-//! row), fsync'd when the tracking state changes and at the end; `summary.json` rewritten
-//! (atomically) every few seconds with the metrics so far. A write that fails (a full disk)
-//! is reported once and the flight goes on: what was written before stays readable.
+//! power cut loses at most the last second), fsync'd when the tracking state changes and at
+//! the end; `summary.json` rewritten (atomically) every few seconds with the metrics so far
+//! and `"partial": true` until the clean end rewrites it. Only whole rows reach the files: a
+//! write that fails (a full disk) is cut back to the last whole row, reported once, and the
+//! flight goes on; the run then ends with an error and its summary says the records stopped.
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -23,8 +24,8 @@ pub const SUMMARY_EVERY: Duration = Duration::from_secs(5);
 /// Writes a flight's records into its folder as they come.
 pub struct FlightRecorder {
     dir: PathBuf,
-    steps: Option<BufWriter<File>>,
-    flight: Option<BufWriter<File>>,
+    steps: Option<RecordFile>,
+    flight: Option<RecordFile>,
     last_flush: Instant,
     last_summary: Instant,
     last_state: Option<TrackState>,
@@ -42,9 +43,66 @@ pub struct RecorderError {
     pub source: std::io::Error,
 }
 
-fn create(path: &Path) -> Result<BufWriter<File>, RecorderError> {
+/// A file that takes whole records only: rows are buffered in memory and written together;
+/// a write that fails part-way is cut back to the end of the last whole row.
+pub struct RecordFile {
+    file: File,
+    buf: Vec<u8>,
+    /// Bytes of whole rows on disk.
+    committed: u64,
+}
+
+impl RecordFile {
+    /// Rows beyond this many bytes in memory are written at once.
+    const BUFFER: usize = 64 * 1024;
+
+    fn new(file: File) -> Self {
+        Self {
+            file,
+            buf: Vec::with_capacity(Self::BUFFER),
+            committed: 0,
+        }
+    }
+
+    /// Adds whole rows (ending in a newline); writes them if the buffer is full.
+    pub fn push(&mut self, rows: &[u8]) -> std::io::Result<()> {
+        self.buf.extend_from_slice(rows);
+        if self.buf.len() >= Self::BUFFER {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Writes what is buffered; on failure the file is cut back to its last whole row.
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        if self.buf.is_empty() {
+            return Ok(());
+        }
+        match self.file.write_all(&self.buf) {
+            Ok(()) => {
+                self.committed += self.buf.len() as u64;
+                self.buf.clear();
+                Ok(())
+            }
+            Err(e) => {
+                // Shrinking needs no space: the partial row goes, the whole ones stay.
+                let _ = self.file.set_len(self.committed);
+                self.buf.clear();
+                Err(e)
+            }
+        }
+    }
+
+    /// Flushes and asks the disk to keep it.
+    pub fn sync(&mut self) -> std::io::Result<()> {
+        self.flush()?;
+        self.file.sync_data()
+    }
+}
+
+fn create(path: &Path) -> Result<RecordFile, RecorderError> {
     File::create(path)
-        .map(|f| BufWriter::with_capacity(64 * 1024, f))
+        .map(RecordFile::new)
         .map_err(|source| RecorderError {
             path: path.display().to_string(),
             source,
@@ -89,8 +147,8 @@ impl FlightRecorder {
         })?;
         let mut steps = create(&dir.join("steps.csv"))?;
         let mut flight = create(&dir.join("flight.csv"))?;
-        let header = |w: &mut BufWriter<File>, text: &str, name: &str| {
-            w.write_all(text.as_bytes())
+        let header = |w: &mut RecordFile, text: &str, name: &str| {
+            w.push(text.as_bytes())
                 .and_then(|()| w.flush())
                 .map_err(|source| RecorderError {
                     path: dir.join(name).display().to_string(),
@@ -130,8 +188,8 @@ impl FlightRecorder {
         let row_steps = crate::report::csv::render_row(&r.step);
         let row_flight = flight_log::render_row(r);
         self.write(|s, f| {
-            s.write_all(row_steps.as_bytes())?;
-            f.write_all(row_flight.as_bytes())
+            s.push(row_steps.as_bytes())?;
+            f.push(row_flight.as_bytes())
         });
         let phase_change = self.last_state.is_some_and(|s| s != r.state);
         self.last_state = Some(r.state);
@@ -151,8 +209,8 @@ impl FlightRecorder {
     pub fn sync(&mut self) {
         self.flush();
         self.write(|s, f| {
-            s.get_ref().sync_data()?;
-            f.get_ref().sync_data()
+            s.sync()?;
+            f.sync()
         });
     }
 
@@ -165,7 +223,7 @@ impl FlightRecorder {
         // would stall the pipeline thread every few seconds): the files are fsync'd at
         // changes of phase and at the end.
         let tmp = self.dir.join(".summary.json.tmp");
-        let result = serde_json::to_vec_pretty(summary)
+        let result = summary_json(summary, Some("the flight is still going on"))
             .map_err(std::io::Error::other)
             .and_then(|bytes| {
                 let mut f = File::create(&tmp)?;
@@ -185,10 +243,7 @@ impl FlightRecorder {
         });
     }
 
-    fn write(
-        &mut self,
-        op: impl FnOnce(&mut BufWriter<File>, &mut BufWriter<File>) -> std::io::Result<()>,
-    ) {
+    fn write(&mut self, op: impl FnOnce(&mut RecordFile, &mut RecordFile) -> std::io::Result<()>) {
         let (Some(s), Some(f)) = (self.steps.as_mut(), self.flight.as_mut()) else {
             return;
         };
@@ -198,22 +253,29 @@ impl FlightRecorder {
     }
 
     /// Stops writing after the first error: reported once, the flight goes on, and the
-    /// files keep what reached the disk (at worst a last line cut short, which the readers
-    /// skip).
+    /// files keep their whole rows.
     fn fail(&mut self, why: String) {
         tracing::error!(
             "flight records in {}: {why}; the flight goes on, its records stop here (disk full?)",
             self.dir.display()
         );
         self.failed = Some(why);
-        // Dropping a BufWriter flushes it; after an error that would only fail again.
-        if let Some(w) = self.steps.take() {
-            let _ = w.into_parts();
-        }
-        if let Some(w) = self.flight.take() {
-            let _ = w.into_parts();
+        self.steps = None;
+        self.flight = None;
+    }
+}
+
+/// `summary.json`: the run's metrics, and `"partial": true` with the reason while the
+/// records are not those of a whole flight (still flying, killed, or stopped by an error).
+pub fn summary_json(summary: &RunSummary, partial: Option<&str>) -> serde_json::Result<Vec<u8>> {
+    let mut v = serde_json::to_value(summary)?;
+    if let serde_json::Value::Object(m) = &mut v {
+        m.insert("partial".into(), partial.is_some().into());
+        if let Some(why) = partial {
+            m.insert("partial_because".into(), why.into());
         }
     }
+    serde_json::to_vec_pretty(&v)
 }
 
 #[cfg(test)]
@@ -243,11 +305,8 @@ mod tests {
         }
         let root = tempfile::tempdir().unwrap();
         let mut r = FlightRecorder::open(root.path(), 1, "cv").unwrap();
-        r.steps = Some(BufWriter::with_capacity(
-            16,
-            File::create("/dev/full").unwrap(),
-        ));
-        r.write(|s, _| s.write_all(&[b'x'; 64]));
+        r.steps = Some(RecordFile::new(File::create("/dev/full").unwrap()));
+        r.write(|s, _| s.push(&[b'x'; 64]).and_then(|()| s.flush()));
         assert!(
             r.failure().unwrap().contains("No space left"),
             "{:?}",
@@ -257,5 +316,31 @@ mod tests {
         r.sync();
         r.write_summary(&RunSummary::from_steps(&[], &[], &[]));
         assert!(!root.path().join("summary.json").exists());
+    }
+
+    #[test]
+    fn a_failed_write_leaves_only_whole_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rows.csv");
+        let mut f = RecordFile::new(File::create(&path).unwrap());
+        f.push(b"a,1\n").unwrap();
+        f.flush().unwrap();
+        f.push(b"b,2\n").unwrap();
+        // A write that fails part-way: the file is then as the last whole row left it.
+        f.file = std::fs::OpenOptions::new().read(true).open(&path).unwrap();
+        assert!(f.flush().is_err());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "a,1\n");
+    }
+
+    #[test]
+    fn the_summary_says_whether_it_is_partial() {
+        let s = RunSummary::from_steps(&[], &[], &[]);
+        let during: serde_json::Value =
+            serde_json::from_slice(&summary_json(&s, Some("still flying")).unwrap()).unwrap();
+        assert_eq!(during["partial"], true);
+        assert_eq!(during["partial_because"], "still flying");
+        let end: serde_json::Value =
+            serde_json::from_slice(&summary_json(&s, None).unwrap()).unwrap();
+        assert_eq!(end["partial"], false);
     }
 }

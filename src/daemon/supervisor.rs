@@ -83,6 +83,20 @@ pub(super) async fn track(
             tracing::error!("the pipeline thread stopped; holding the vehicle");
             break StopReason::Fault;
         }
+        if let Some(o) = vehicle.link.state().origin_changed {
+            let text = "infotrack: vehicle origin changed in flight; holding";
+            eprintln!(
+                "the vehicle's GPS_GLOBAL_ORIGIN changed in flight (now {:.7}, {:.7}): the world \
+                 and its geofence would move; holding the vehicle",
+                o.lat_deg, o.lon_deg
+            );
+            sup.tell_gcs(
+                mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_CRITICAL,
+                text,
+            )
+            .await;
+            break StopReason::OriginChanged;
+        }
         sup.switch_faults(began.elapsed().as_secs_f64());
         let snap = sup.feed_vehicle_state();
         sup.follow_pilot().await;
@@ -376,6 +390,7 @@ pub(super) async fn stop(
         StopReason::Duration => "duration",
         StopReason::Signal => "signal",
         StopReason::Fault => "fault",
+        StopReason::OriginChanged => "origin changed",
     };
     let said = if tracked.engaged {
         match link.hold().await {

@@ -54,8 +54,37 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
             source,
         })?;
     }
-    std::fs::write(path, bytes).map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        source,
+    whole_file(path, |tmp| {
+        std::fs::write(tmp, bytes).map_err(|source| ReportError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
     })
+}
+
+/// Writes `path` whole or not at all: `write` fills a temporary file beside it (same
+/// extension, so that a plot backend picks the same format), which is renamed over `path`
+/// only when the write succeeded, and removed when it failed (a full disk leaves no
+/// truncated file, no 0-byte PNG).
+pub fn whole_file(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), ReportError>,
+) -> Result<(), ReportError> {
+    let name = path
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let tmp = path.with_file_name(format!(".partial-{name}"));
+    let done = write(&tmp).and_then(|()| {
+        std::fs::File::open(&tmp)
+            .and_then(|f| f.sync_all())
+            .and_then(|()| std::fs::rename(&tmp, path))
+            .map_err(|source| ReportError::Io {
+                path: path.to_path_buf(),
+                source,
+            })
+    });
+    if done.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    done
 }

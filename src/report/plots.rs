@@ -37,7 +37,7 @@ const SNAPSHOT_COLOURS: [RGBColor; 3] = [
 
 /// The scene: workspace, roads, occlusions, target and agent tracks, particles at a few
 /// instants.
-pub fn scene(
+fn draw_scene(
     path: &Path,
     title: &str,
     world: &World,
@@ -119,7 +119,11 @@ pub fn scene(
 
 /// Estimation error over time; red spans: target occluded; grey spans: target outside the
 /// footprint.
-pub fn estimation_error(path: &Path, title: &str, steps: &[StepRecord]) -> Result<(), ReportError> {
+fn draw_estimation_error(
+    path: &Path,
+    title: &str,
+    steps: &[StepRecord],
+) -> Result<(), ReportError> {
     ensure_parent(path)?;
     let t_max = steps.last().map(|s| s.t_s).unwrap_or(1.0);
     let e_max = steps
@@ -190,7 +194,7 @@ pub fn estimation_error(path: &Path, title: &str, steps: &[StepRecord]) -> Resul
 }
 
 /// One bar chart per metric, one bar (mean, with a +-sd whisker) per method.
-pub fn metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), ReportError> {
+fn draw_metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), ReportError> {
     ensure_parent(path)?;
     let root = BitMapBackend::new(path, (1200, 800)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
@@ -264,4 +268,27 @@ pub fn metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), Report
             .map_err(|e| plot_err(path, e))?;
     }
     root.present().map_err(|e| plot_err(path, e))
+}
+
+/// The scene: workspace, roads, occlusions, target and agent tracks, particles at a few
+/// instants; written whole or not at all.
+pub fn scene(
+    path: &Path,
+    title: &str,
+    world: &World,
+    steps: &[StepRecord],
+    snapshots: &[Snapshot],
+) -> Result<(), ReportError> {
+    super::whole_file(path, |tmp| draw_scene(tmp, title, world, steps, snapshots))
+}
+
+/// The estimation error over time; written whole or not at all.
+pub fn estimation_error(path: &Path, title: &str, steps: &[StepRecord]) -> Result<(), ReportError> {
+    super::whole_file(path, |tmp| draw_estimation_error(tmp, title, steps))
+}
+
+/// One bar chart per metric, one bar (mean, with a +-sd whisker) per method; written whole
+/// or not at all.
+pub fn metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), ReportError> {
+    super::whole_file(path, |tmp| draw_metrics_bars(tmp, result))
 }

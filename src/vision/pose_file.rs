@@ -53,7 +53,7 @@ struct PoseFile {
 /// Reads a pose file: the camera model and the vehicle pose.
 pub fn load(path: &Path) -> Result<(CameraModel, VehiclePoseNed), VisionError> {
     let name = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| VisionError::Io {
+    let text = crate::bounded_file::read_text(path, 1 << 20).map_err(|e| VisionError::Io {
         path: name.clone(),
         message: e.to_string(),
     })?;

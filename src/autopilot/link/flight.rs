@@ -332,15 +332,30 @@ impl VehicleLink {
     /// height is taken AMSL through the estimator's own offset: GLOBAL_POSITION_INT's
     /// altitude now plus the difference between `up_m` and LOCAL_POSITION_NED's height.
     async fn px4_hold_at_altitude(&self, up_m: f64) -> Result<(), LinkError> {
+        /// Telemetry older than this does not say where the vehicle is now, s.
+        const FRESH_S: f64 = 2.0;
+        /// The correction is for a position loop's wander (PX4 SIH: ~0.5 m); a larger one
+        /// means the state is wrong, and the hold keeps the altitude it has instead, m.
+        const MAX_CORRECTION_M: f64 = 5.0;
         let s = self.state();
-        let (Some((_, _, _, relative_m)), Some(home_amsl_m), Some((_, local, _))) =
+        let fresh = |at: Instant| at.elapsed().as_secs_f64() <= FRESH_S;
+        let (Some((g_at, _, _, relative_m)), Some(home_amsl_m), Some((l_at, local, _))) =
             (s.global, s.home_alt_amsl_m, s.local_ned)
         else {
             return Err(LinkError::NoTelemetry(
                 "GLOBAL_POSITION_INT and LOCAL_POSITION_NED",
             ));
         };
-        let amsl_m = home_amsl_m + relative_m + (up_m + local.z_down_m);
+        if !(fresh(g_at) && fresh(l_at)) {
+            return Err(LinkError::NoTelemetry(
+                "fresh GLOBAL_POSITION_INT and LOCAL_POSITION_NED",
+            ));
+        }
+        let correction_m = up_m + local.z_down_m;
+        if correction_m.abs() > MAX_CORRECTION_M {
+            return Err(LinkError::ImplausibleHold(correction_m));
+        }
+        let amsl_m = home_amsl_m + relative_m + correction_m;
         if !amsl_m.is_finite() {
             return Err(LinkError::NonFiniteSetpoint);
         }

@@ -1,5 +1,6 @@
 //! What the link reads: one dispatch over the vehicle's messages into the vehicle state.
 
+use super::plausible;
 use super::*;
 
 /// Follows the vehicle's boot clock; a jump back by more than a second (more than any
@@ -8,7 +9,13 @@ fn boot_clock(s: &mut VehicleState, events: &broadcast::Sender<LinkEvent>, t_ms:
     if let Some(last) = s.time_boot_ms {
         if t_ms.saturating_add(1000) < last {
             s.reboots += 1;
-            tracing::warn!("vehicle rebooted (boot clock {last} ms -> {t_ms} ms)");
+            // At powers of two: spoofed boot times must not flood the log.
+            if s.reboots.is_power_of_two() {
+                tracing::warn!(
+                    "vehicle rebooted (boot clock {last} ms -> {t_ms} ms; {} time(s) so far)",
+                    s.reboots
+                );
+            }
             let _ = events.send(LinkEvent::VehicleRebooted);
             s.time_boot_ms = Some(t_ms);
             return;
@@ -41,6 +48,18 @@ pub(super) fn on_message(
                 "dropped {} telemetry message(s) with NaN or infinite fields so far (latest: {})",
                 s.non_finite_dropped,
                 mavlink::Message::message_name(m)
+            );
+        }
+        return;
+    }
+    if let Err(why) = plausible_telemetry(&mut s.plausibility, now, m) {
+        s.implausible_dropped += 1;
+        if s.implausible_dropped.is_power_of_two() {
+            tracing::warn!(
+                "dropped {} telemetry message(s) the vehicle cannot have flown so far (latest: {}, {})",
+                s.implausible_dropped,
+                mavlink::Message::message_name(m),
+                why.0
             );
         }
         return;
@@ -131,12 +150,28 @@ pub(super) fn on_message(
             s.home_alt_amsl_m = Some((g.alt as f64 - g.relative_alt as f64) * 1e-3);
         }
         MavMessage::EXTENDED_SYS_STATE(e) => s.landed = Some((now, e.landed_state)),
-        MavMessage::GPS_GLOBAL_ORIGIN(o) => {
-            s.global_origin = Some(crate::geodesy::GeodeticWgs84 {
+        MavMessage::GPS_GLOBAL_ORIGIN(o) => on_origin(
+            &mut s,
+            events,
+            crate::geodesy::GeodeticWgs84 {
                 lat_deg: o.latitude as f64 * 1e-7,
                 lon_deg: o.longitude as f64 * 1e-7,
                 alt_m: o.altitude as f64 * 1e-3,
-            })
+            },
+        ),
+        MavMessage::HOME_POSITION(hp) => {
+            s.home_position = Some((
+                crate::geodesy::GeodeticWgs84 {
+                    lat_deg: hp.latitude as f64 * 1e-7,
+                    lon_deg: hp.longitude as f64 * 1e-7,
+                    alt_m: hp.altitude as f64 * 1e-3,
+                },
+                PositionNed {
+                    x_north_m: hp.x as f64,
+                    y_east_m: hp.y as f64,
+                    z_down_m: hp.z as f64,
+                },
+            ))
         }
         MavMessage::SYS_STATUS(st) => s.battery_v = Some((now, st.voltage_battery as f64 * 1e-3)),
         MavMessage::PARAM_VALUE(p) => {
@@ -261,4 +296,75 @@ fn non_finite_telemetry(m: &MavMessage) -> bool {
         ]),
         _ => false,
     }
+}
+
+/// Position, velocity, attitude and global position the vehicle can have flown: see
+/// `plausible.rs`. Other messages pass.
+fn plausible_telemetry(
+    p: &mut super::Plausibility,
+    now: Instant,
+    m: &MavMessage,
+) -> Result<(), plausible::Implausible> {
+    let env = p.envelope;
+    match m {
+        MavMessage::LOCAL_POSITION_NED(l) => {
+            let ned = [l.x as f64, l.y as f64, l.z as f64];
+            plausible::local_in_world(&env, ned, [l.vx as f64, l.vy as f64, l.vz as f64])?;
+            p.local.check(&env, now, [ned[0], ned[1]], -ned[2])
+        }
+        MavMessage::ATTITUDE(a) => plausible::attitude(
+            [a.roll as f64, a.pitch as f64, a.yaw as f64],
+            [a.rollspeed as f64, a.pitchspeed as f64, a.yawspeed as f64],
+        ),
+        MavMessage::GLOBAL_POSITION_INT(g) => {
+            let (lat, lon) = (g.lat as f64 * 1e-7, g.lon as f64 * 1e-7);
+            let relative_m = g.relative_alt as f64 * 1e-3;
+            plausible::global_on_earth(&env, lat, lon, relative_m)?;
+            let cm_per_s = [g.vx as f64, g.vy as f64, g.vz as f64];
+            plausible::speed_in_envelope(&env, cm_per_s.map(|v| v * 1e-2))?;
+            let (lat0, lon0) = *p.global_ref.get_or_insert((lat, lon));
+            // Metres about the first fix: an equirectangular view is exact enough for the
+            // tens of metres a glitch check needs.
+            const M_PER_DEG: f64 = 111_320.0;
+            let north_m = (lat - lat0) * M_PER_DEG;
+            let east_m = (lon - lon0) * M_PER_DEG * lat0.to_radians().cos();
+            let amsl_m = g.alt as f64 * 1e-3;
+            plausible::amsl_on_earth(amsl_m)?;
+            p.global.check(&env, now, [north_m, east_m], amsl_m)?;
+            // Home's height (AMSL minus relative) moves only when home is set again.
+            p.home.check(&env, now, [0.0, 0.0], amsl_m - relative_m)
+        }
+        _ => Ok(()),
+    }
+}
+
+/// GPS_GLOBAL_ORIGIN: before the world is placed, the latest is kept (the daemon cross-checks
+/// it); after, one that moves the origin by more than a metre is reported and kept apart: the
+/// placement never moves in flight.
+fn on_origin(
+    s: &mut VehicleState,
+    events: &broadcast::Sender<LinkEvent>,
+    origin: crate::geodesy::GeodeticWgs84,
+) {
+    /// Re-sent origins differ by their 1e-7 degree rounding at most.
+    const SAME_ORIGIN_M: f64 = 1.0;
+    if !(origin.lat_deg.abs() <= 90.0 && origin.lon_deg.abs() <= 180.0) {
+        return;
+    }
+    let Some(fixed) = s.origin_fixed else {
+        s.global_origin = Some(origin);
+        return;
+    };
+    let moved_m = fixed.horizontal_distance_m(&origin);
+    if moved_m <= SAME_ORIGIN_M || s.origin_changed.is_some() {
+        return;
+    }
+    tracing::error!(
+        "the vehicle's GPS_GLOBAL_ORIGIN moved {moved_m:.1} m in flight (to {:.7}, {:.7}): \
+         the world no longer lies where it was placed",
+        origin.lat_deg,
+        origin.lon_deg
+    );
+    s.origin_changed = Some(origin);
+    let _ = events.send(LinkEvent::OriginChanged);
 }

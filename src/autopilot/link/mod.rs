@@ -30,12 +30,14 @@ use crate::world::geometry::BoundsEnu;
 mod flight;
 mod inbound;
 mod params;
+pub mod plausible;
 mod stream;
 mod tasks;
 mod url;
 
 pub use inbound::fuzz;
 use inbound::{on_message, Ids};
+pub use params::ParamList;
 use stream::{
     position_target, vehicle_to_world_ned, world_to_vehicle_ned, StreamedTarget, Streamer,
 };
@@ -136,6 +138,10 @@ pub enum LinkError {
     /// A setpoint with a NaN or infinite coordinate or heading was asked for (never sent).
     #[error("setpoint with a non-finite position, velocity or yaw refused")]
     NonFiniteSetpoint,
+    /// The hold's altitude correction is larger than a position loop's wander: the
+    /// vehicle's state is not to be trusted, so the hold keeps its own altitude.
+    #[error("an altitude correction of {0:.1} m is larger than a position loop's wander")]
+    ImplausibleHold(f64),
     /// A command needs telemetry the vehicle has not sent yet.
     #[error("no {0} from the vehicle yet")]
     NoTelemetry(&'static str),
@@ -174,6 +180,8 @@ pub struct LinkConfig {
     /// The vehicle's system and component id; `None`: the first autopilot heard. Either
     /// way the link locks onto one vehicle and ignores (and reports once) every other.
     pub vehicle: Option<(u8, u8)>,
+    /// What the vehicle can fly: telemetry beyond it is dropped.
+    pub envelope: plausible::Envelope,
 }
 
 impl LinkConfig {
@@ -192,6 +200,7 @@ impl LinkConfig {
             heartbeat_timeout: Duration::from_secs(3),
             tlog: None,
             vehicle: None,
+            envelope: plausible::Envelope::default(),
         }
     }
 }
@@ -244,6 +253,8 @@ pub enum LinkEvent {
     VehicleBack,
     /// The vehicle's boot clock went backwards: it rebooted (and is disarmed).
     VehicleRebooted,
+    /// A GPS_GLOBAL_ORIGIN other than the one the world was placed with.
+    OriginChanged,
 }
 
 /// The vehicle as the link last saw it.
@@ -272,6 +283,14 @@ pub struct VehicleState {
     /// GPS_GLOBAL_ORIGIN: where the vehicle's local NED frame is on Earth (its estimator's
     /// origin). Heights are AMSL as the message gives them.
     pub global_origin: Option<crate::geodesy::GeodeticWgs84>,
+    /// HOME_POSITION: home on Earth (heights AMSL) and in the vehicle's local NED frame.
+    pub home_position: Option<(crate::geodesy::GeodeticWgs84, PositionNed)>,
+    /// The origin the world was placed with ([`VehicleLink::place_in_world`]): fixed for
+    /// the flight.
+    pub origin_fixed: Option<crate::geodesy::GeodeticWgs84>,
+    /// A GPS_GLOBAL_ORIGIN that differs from `origin_fixed`, once heard: the world would
+    /// move under the vehicle, so the daemon holds.
+    pub origin_changed: Option<crate::geodesy::GeodeticWgs84>,
     /// EXTENDED_SYS_STATE landed state and when.
     pub landed: Option<(Instant, MavLandedState)>,
     /// SYS_STATUS battery voltage (V) and when.
@@ -299,6 +318,27 @@ pub struct VehicleState {
     pub ignored_autopilots: std::collections::BTreeSet<(u8, u8)>,
     /// Telemetry messages dropped for a NaN or infinite field.
     pub non_finite_dropped: u64,
+    /// Telemetry messages dropped as beyond what the vehicle can have flown
+    /// (`plausible.rs`).
+    pub implausible_dropped: u64,
+    /// The tracks telemetry is judged against.
+    pub plausibility: Plausibility,
+}
+
+/// What telemetry is judged against: the envelope and the accepted tracks of the local and
+/// the global position.
+#[derive(Debug, Clone, Default)]
+pub struct Plausibility {
+    /// What the vehicle can do.
+    pub envelope: plausible::Envelope,
+    /// LOCAL_POSITION_NED's track (north, east; up).
+    local: plausible::Track,
+    /// GLOBAL_POSITION_INT's track, metres about `global_ref` and AMSL.
+    global: plausible::Track,
+    /// The height of home GLOBAL_POSITION_INT implies (AMSL minus relative), m.
+    home: plausible::Track,
+    /// The first accepted GLOBAL_POSITION_INT (lat, lon, deg): where its metres are taken.
+    global_ref: Option<(f64, f64)>,
 }
 
 /// A running link to one vehicle.
@@ -349,7 +389,13 @@ impl VehicleLink {
             })?)),
             None => None,
         };
-        let state = Arc::new(Mutex::new(VehicleState::default()));
+        let state = Arc::new(Mutex::new(VehicleState {
+            plausibility: Plausibility {
+                envelope: cfg.envelope,
+                ..Plausibility::default()
+            },
+            ..VehicleState::default()
+        }));
         let (events, _) = broadcast::channel(1024);
         let header = MavHeader {
             system_id: cfg.system_id as u32,
@@ -687,6 +733,8 @@ impl VehicleLink {
     /// [`Self::local_ned_in_world`] and every setpoint are converted between the two.
     pub fn place_in_world(&self, placement: WorldPlacement) {
         *self.streamer.placement.lock().expect("placement poisoned") = Some(placement);
+        let mut s = self.state.lock().expect("state poisoned");
+        s.origin_fixed = s.global_origin;
     }
 }
 

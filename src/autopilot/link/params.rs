@@ -2,7 +2,71 @@
 
 use super::*;
 
+/// Every parameter the vehicle listed (PARAM_REQUEST_LIST): name -> (value, type).
+#[derive(Debug, Clone, Default)]
+pub struct ParamList {
+    /// What arrived.
+    pub values: std::collections::HashMap<String, (f64, ParamType)>,
+    /// Whether every index of the vehicle's count arrived: then a name not here is not on
+    /// the vehicle.
+    pub complete: bool,
+}
+
 impl VehicleLink {
+    /// Reads every parameter in one batch (PARAM_REQUEST_LIST), asking again while parts are
+    /// missing, until all have arrived or `silence` passes without a new one; says how far it
+    /// is every five seconds.
+    pub async fn param_list(&self, silence: Duration) -> ParamList {
+        let (ts, tc) = self.target();
+        let flavor = self.flavor();
+        let mut rx = self.events.subscribe();
+        let mut list = ParamList::default();
+        let mut seen = std::collections::HashSet::new();
+        let mut count: Option<u16> = None;
+        let started = Instant::now();
+        let mut progress_at = started + Duration::from_secs(5);
+        for _ in 0..self.cfg.attempts {
+            let ask = MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
+                target_system: ts,
+                target_component: tc,
+            });
+            if self.send(&ask).await.is_err() {
+                return list;
+            }
+            while let Ok(event) = tokio::time::timeout(silence, rx.recv()).await {
+                let Ok(LinkEvent::Param {
+                    name,
+                    wire,
+                    ty: Some(t),
+                    index,
+                    count: n,
+                }) = event
+                else {
+                    continue;
+                };
+                count = Some(n);
+                seen.insert(index);
+                list.values.insert(name, (decode_wire(flavor, t, wire), t));
+                if Instant::now() >= progress_at {
+                    progress_at += Duration::from_secs(5);
+                    tracing::warn!(
+                        "reading the vehicle's parameters: {} of {n} so far",
+                        seen.len()
+                    );
+                }
+                if seen.len() >= n as usize {
+                    list.complete = true;
+                    return list;
+                }
+            }
+            if count.is_none() {
+                // No answer at all: the vehicle does not list; asking again will not help.
+                return list;
+            }
+        }
+        list
+    }
+
     /// Reads one parameter by name.
     pub async fn param_read(&self, name: &str) -> Result<(f64, ParamType), LinkError> {
         let (ts, tc) = self.target();
