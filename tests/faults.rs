@@ -8,19 +8,17 @@
 
 mod common;
 
-use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+use common::relay::{frame, relay};
 use common::{free_udp_port, lab_config_with, mock_process, output_text, udp_mock};
 use infotrack::autopilot::modes::Flavor;
 use infotrack::mock::MockConfig;
 use mavlink::dialects::ardupilotmega::*;
-use mavlink::MavHeader;
 use tokio::net::UdpSocket;
 
 fn root() -> PathBuf {
@@ -57,18 +55,6 @@ fn sizes_and_rates_beyond_their_bounds_are_refused_naming_the_key() {
     }
 }
 
-/// A frame of `msg` from (`sys`, `comp`), as the wire carries it.
-fn frame(sys: u8, comp: u8, msg: &MavMessage) -> Vec<u8> {
-    let mut bytes = Vec::new();
-    let header = MavHeader {
-        system_id: sys.into(),
-        component_id: comp,
-        sequence: 0,
-    };
-    mavlink::write_v2_msg(&mut bytes, header, msg).unwrap();
-    bytes
-}
-
 /// What a hostile network adds: a second autopilot (system 42) with its own pose far away,
 /// and NaN positions claiming to come from the vehicle itself.
 fn hostile_frames() -> Vec<Vec<u8>> {
@@ -98,92 +84,13 @@ fn hostile_frames() -> Vec<Vec<u8>> {
     ]
 }
 
-/// A UDP relay between infotrack (which connects to its front port) and the mock autopilot;
-/// it keeps the STATUSTEXTs infotrack sends and can add frames of its own.
-struct Relay {
-    /// Whether `inject` frames have been sent to infotrack.
-    injected: Arc<AtomicBool>,
-    /// The STATUSTEXTs infotrack sent toward the vehicle.
-    texts: Arc<Mutex<Vec<String>>>,
-}
-
-/// A relay to the mock at `vehicle`, and the loopback port infotrack connects to, sending
-/// `inject` to infotrack every 100 ms once the real vehicle's heartbeat has been passed on
-/// (so that the first autopilot infotrack hears is the real one). The relay binds its front
-/// port itself: a port asked for free and bound later was once taken in between by a test
-/// running beside it (AddrInUse in CI).
-async fn relay(vehicle: u16, inject: Vec<Vec<u8>>) -> (Relay, u16) {
-    let front = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
-    let front_port = front.local_addr().unwrap().port();
-    let back = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
-    back.connect(("127.0.0.1", vehicle)).await.unwrap();
-    let companion: Arc<Mutex<Option<SocketAddr>>> = Arc::default();
-    let vehicle_heard = Arc::new(AtomicBool::new(false));
-    let r = Relay {
-        injected: Arc::default(),
-        texts: Arc::default(),
-    };
-    {
-        let (front, back, companion) = (front.clone(), back.clone(), companion.clone());
-        let texts = r.texts.clone();
-        tokio::spawn(async move {
-            let mut buf = [0u8; 2048];
-            while let Ok((n, from)) = front.recv_from(&mut buf).await {
-                *companion.lock().unwrap() = Some(from);
-                let _ = back.send(&buf[..n]).await;
-                let mut reader = mavlink::MavlinkReader::new(&buf[..n]);
-                if let Ok((_, MavMessage::STATUSTEXT(t))) =
-                    reader.read_message::<MavMessage>(mavlink::MavlinkVersion::V2)
-                {
-                    let said = t.text.to_str().unwrap_or("").to_string();
-                    texts.lock().unwrap().push(said);
-                }
-            }
-        });
-    }
-    {
-        let (front, companion, heard) = (front.clone(), companion.clone(), vehicle_heard.clone());
-        tokio::spawn(async move {
-            let mut buf = [0u8; 2048];
-            while let Ok(n) = back.recv(&mut buf).await {
-                let to = *companion.lock().unwrap();
-                if let Some(to) = to {
-                    let _ = front.send_to(&buf[..n], to).await;
-                    let mut reader = mavlink::MavlinkReader::new(&buf[..n]);
-                    if let Ok((_, MavMessage::HEARTBEAT(_))) =
-                        reader.read_message::<MavMessage>(mavlink::MavlinkVersion::V2)
-                    {
-                        heard.store(true, Ordering::Relaxed);
-                    }
-                }
-            }
-        });
-    }
-    if !inject.is_empty() {
-        let injected = r.injected.clone();
-        tokio::spawn(async move {
-            loop {
-                tokio::time::sleep(Duration::from_millis(100)).await;
-                let to = *companion.lock().unwrap();
-                if let (Some(to), true) = (to, vehicle_heard.load(Ordering::Relaxed)) {
-                    for f in &inject {
-                        let _ = front.send_to(f, to).await;
-                    }
-                    injected.store(true, Ordering::Relaxed);
-                }
-            }
-        });
-    }
-    (r, front_port)
-}
-
 /// Rows "a second MAVLink system is adopted" and "NaN in LOCAL_POSITION_NED enters the
 /// vehicle state": the link stays on the first autopilot, reports the other once, never
 /// addresses it, and drops the NaN poses (none reach the flight records).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_second_vehicle_and_nan_poses_on_the_wire_are_refused() {
     let (_mock, vehicle) = udp_mock(MockConfig::new(Flavor::Px4)).await;
-    let (relay, front) = relay(vehicle, hostile_frames()).await;
+    let (relay, front) = relay(vehicle, hostile_frames(), Duration::ZERO).await;
     let dir = tempfile::tempdir().unwrap();
     let out = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
         .args(["run", "--quiet", "--duration", "12", "--motion", "cv"])
@@ -277,7 +184,7 @@ async fn a_second_vehicle_and_nan_poses_on_the_wire_are_refused() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_disk_is_said_to_the_log_and_the_gcs_and_the_flight_goes_on() {
     let (_mock, vehicle) = udp_mock(MockConfig::new(Flavor::Px4)).await;
-    let (relay, front) = relay(vehicle, Vec::new()).await;
+    let (relay, front) = relay(vehicle, Vec::new(), Duration::ZERO).await;
     let dir = tempfile::tempdir().unwrap();
     let mut cmd = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"));
     cmd.args(["run", "--quiet", "--duration", "25", "--motion", "cv"])

@@ -35,6 +35,7 @@ pub(super) async fn connect(
     lc.component_id = d.component_id;
     lc.setpoint_hz = d.setpoint_hz;
     lc.geofence_enu = Some(cfg.workspace_enu);
+    lc.envelope = telemetry_envelope(cfg);
     lc.tlog = opts.tlog.clone();
     lc.vehicle = d.vehicle_id.map(|[s, c]| (s, c));
     lc.signing_key = d.signing_key.as_deref().map(SigningKey::load).transpose()?;
@@ -54,6 +55,19 @@ pub(super) async fn connect(
         url,
         mock,
     })
+}
+
+/// What the vehicle can fly, from the agent's planned speed and the geofence's farthest
+/// corner from the world's origin (the vehicle's own frame is within the world origin's
+/// tolerance of it).
+fn telemetry_envelope(cfg: &Config) -> crate::autopilot::link::plausible::Envelope {
+    let w = &cfg.workspace_enu;
+    let reach_m = [w.x_min_m, w.x_max_m]
+        .iter()
+        .flat_map(|x| [w.y_min_m, w.y_max_m].map(|y| x.hypot(y)))
+        .fold(0.0, f64::max)
+        + cfg.world.as_ref().map_or(0.0, |wc| wc.origin_tolerance_m);
+    crate::autopilot::link::plausible::Envelope::for_vehicle(cfg.agent.speed_limit_mps, reach_m)
 }
 
 /// `[world]`: the vehicle's local origin (GPS_GLOBAL_ORIGIN) must be known, agree with

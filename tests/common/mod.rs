@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests that fly the mock autopilot.
 #![allow(dead_code)]
 
+pub mod relay;
+
 use std::time::Duration;
 
 use infotrack::autopilot::link::{LinkEvent, VehicleLink};

@@ -44,11 +44,11 @@ impl Default for Envelope {
 
 impl Envelope {
     /// Twice the planned speed plus 5 m/s (a pilot may fly faster than infotrack plans),
-    /// and 2 km (at least) beyond the geofence's farthest corner.
+    /// and 1 km beyond the geofence's farthest corner (where a pilot may launch it).
     pub fn for_vehicle(planned_speed_mps: f64, fence_reach_m: f64) -> Self {
         Self {
             max_speed_mps: 2.0 * planned_speed_mps.max(0.0) + 5.0,
-            max_range_m: fence_reach_m.max(0.0) + 2_000.0,
+            max_range_m: fence_reach_m.max(0.0) + 1_000.0,
             ..Self::default()
         }
     }
