@@ -27,11 +27,13 @@ fn allowed(layer: &str) -> Vec<&'static str> {
     };
     match layer {
         l if CORE.contains(&l) => core,
-        "vision" => with(&[]),
+        // Reading a user's file without trusting it: a shell of its own, below the others.
+        "bounded_file" => Vec::new(),
+        "vision" => with(&["bounded_file"]),
         // Validation checks vehicle URLs with the link's own parser.
-        "config" => with(&["vision", "autopilot"]),
+        "config" => with(&["vision", "autopilot", "bounded_file"]),
         // The vehicle link: never the mock, the simulator or the daemon.
-        "autopilot" => with(&[]),
+        "autopilot" => with(&["bounded_file"]),
         "mock" => with(&["autopilot"]),
         "simulated" => with(&["vision", "config"]),
         "report" => with(&["config", "sim", "simulated"]),

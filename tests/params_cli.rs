@@ -158,3 +158,41 @@ fn a_signed_vehicle_answers_only_a_signed_companion() {
         String::from_utf8_lossy(&signed.stderr)
     );
 }
+
+/// "All or nothing": the vehicle never confirms the second parameter of the file; the first,
+/// already written, is set back to the value read before, and the run says so.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_write_that_fails_midway_is_rolled_back() {
+    use infotrack::autopilot::modes::Flavor;
+    use infotrack::mock::MockConfig;
+    use mavlink::dialects::ardupilotmega::MavMessage;
+    let (mock, vehicle) = common::udp_mock(MockConfig::new(Flavor::Px4)).await;
+    let never_acc_hor = |m: &MavMessage| matches!(m, MavMessage::PARAM_SET(s) if s.param_id.to_str().unwrap_or("").starts_with("MPC_ACC_HOR"));
+    let (_relay, front) = common::relay::relay_dropping(
+        vehicle,
+        Vec::new(),
+        std::time::Duration::ZERO,
+        never_acc_hor,
+    )
+    .await;
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("two.params");
+    std::fs::write(
+        &file,
+        "1\t1\tMPC_XY_VEL_MAX\t13\t9\n1\t1\tMPC_ACC_HOR\t4\t9\n",
+    )
+    .unwrap();
+    let out = tokio::task::spawn_blocking(move || params("apply", &file, front))
+        .await
+        .unwrap();
+    let all = common::output_text(&out);
+    assert_eq!(out.status.code(), Some(1), "{all}");
+    assert!(
+        all.contains("failed midway")
+            && all.contains("1 parameter(s) written before were set back"),
+        "{all}"
+    );
+    assert!(all.contains("set back (a later write failed)"), "{all}");
+    let now = mock.with(|m| m.params().get("MPC_XY_VEL_MAX", -1.0));
+    assert_eq!(now, 12.0, "MPC_XY_VEL_MAX is back to its value before");
+}

@@ -39,6 +39,17 @@ pub struct Relay {
 /// port itself: a port asked for free and bound later was once taken in between by a test
 /// running beside it (AddrInUse in CI).
 pub async fn relay(vehicle: u16, inject: Vec<Vec<u8>>, after: Duration) -> (Relay, u16) {
+    relay_dropping(vehicle, inject, after, |_| false).await
+}
+
+/// [`relay`], which also drops what infotrack sends that `drop` picks (a vehicle that never
+/// hears one kind of message).
+pub async fn relay_dropping(
+    vehicle: u16,
+    inject: Vec<Vec<u8>>,
+    after: Duration,
+    drop: fn(&MavMessage) -> bool,
+) -> (Relay, u16) {
     let front = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
     let front_port = front.local_addr().unwrap().port();
     let back = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
@@ -56,11 +67,16 @@ pub async fn relay(vehicle: u16, inject: Vec<Vec<u8>>, after: Duration) -> (Rela
             let mut buf = [0u8; 2048];
             while let Ok((n, from)) = front.recv_from(&mut buf).await {
                 *companion.lock().unwrap() = Some(from);
-                let _ = back.send(&buf[..n]).await;
                 let mut reader = mavlink::MavlinkReader::new(&buf[..n]);
-                if let Ok((_, MavMessage::STATUSTEXT(t))) =
-                    reader.read_message::<MavMessage>(mavlink::MavlinkVersion::V2)
-                {
+                let msg = reader
+                    .read_message::<MavMessage>(mavlink::MavlinkVersion::V2)
+                    .ok()
+                    .map(|(_, m)| m);
+                if msg.as_ref().is_some_and(drop) {
+                    continue;
+                }
+                let _ = back.send(&buf[..n]).await;
+                if let Some(MavMessage::STATUSTEXT(t)) = msg {
                     let said = t.text.to_str().unwrap_or("").to_string();
                     texts.lock().unwrap().push(said);
                 }

@@ -93,16 +93,8 @@ pub(super) fn on_message(
                     let commanded = s.commanded_mode == Some(mode);
                     if commanded {
                         s.commanded_mode = None;
-                    } else if s.has_armed {
-                        tracing::warn!(
-                            "vehicle changed mode {old:?} -> {mode:?} by itself (failsafe?)"
-                        );
-                        s.unexpected_mode_changes.push((old, mode));
                     } else {
-                        tracing::info!(
-                            "vehicle changed mode {old:?} -> {mode:?} by itself before arming (its start-up, or the pilot on the ground)"
-                        );
-                        s.mode_changes_before_arming.push((old, mode));
+                        note_own_mode_change(&mut s, old, mode);
                     }
                     let _ = events.send(LinkEvent::ModeChanged {
                         from: old,
@@ -267,7 +259,7 @@ fn lock_onto(s: &mut VehicleState, configured: Option<(u8, u8)>, sender: (u8, u8
     };
     if ours {
         s.address = Some(sender);
-    } else if s.ignored_autopilots.insert(sender) {
+    } else if s.ignored_autopilots.len() < MAX_LISTED && s.ignored_autopilots.insert(sender) {
         let to = s.address.or(configured).expect("locked or configured");
         tracing::warn!(
             "ignoring the autopilot of system {} component {}: infotrack flies system {} component {} only",
@@ -367,4 +359,34 @@ fn on_origin(
     );
     s.origin_changed = Some(origin);
     let _ = events.send(LinkEvent::OriginChanged);
+}
+
+/// Mode changes, ignored autopilots and the like kept for the report: a spoofed heartbeat
+/// with another mode every frame must neither flood the log nor grow memory without end.
+const MAX_LISTED: usize = 64;
+
+/// A mode change the link did not ask for: listed (up to [`MAX_LISTED`]) and logged at
+/// powers of two.
+fn note_own_mode_change(s: &mut VehicleState, old: Mode, mode: Mode) {
+    let armed = s.has_armed;
+    let list = if armed {
+        &mut s.unexpected_mode_changes
+    } else {
+        &mut s.mode_changes_before_arming
+    };
+    if list.len() < MAX_LISTED {
+        list.push((old, mode));
+    }
+    s.own_mode_changes += 1;
+    if !s.own_mode_changes.is_power_of_two() {
+        return;
+    }
+    let n = s.own_mode_changes;
+    if armed {
+        tracing::warn!("vehicle changed mode {old:?} -> {mode:?} by itself (failsafe?; {n} such change(s) so far)");
+    } else {
+        tracing::info!(
+            "vehicle changed mode {old:?} -> {mode:?} by itself before arming (its start-up, or the pilot on the ground; {n} so far)"
+        );
+    }
 }

@@ -305,6 +305,8 @@ pub struct VehicleState {
     pub mode_changes_before_arming: Vec<(Mode, Mode)>,
     /// The vehicle has reported itself armed at least once.
     pub has_armed: bool,
+    /// Mode changes the link did not ask for, all of them (the lists keep the first 64).
+    pub own_mode_changes: u64,
     /// The mode the link last asked for.
     pub commanded_mode: Option<Mode>,
     /// No heartbeat for the configured timeout (cleared by the next one).
