@@ -14,7 +14,7 @@ use infotrack::sim::{EstimatorKind, MonteCarlo};
 #[derive(Parser)]
 #[command(
     name = "infotrack",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (commit ", env!("INFOTRACK_COMMIT"), ")"),
     about = "Find and follow a hidden moving ground target from a drone"
 )]
 struct Cli {
@@ -38,7 +38,8 @@ enum Command {
     /// Run the SITL-free mock autopilot (PX4 or ArduPilot flavour) on a MAVLink transport
     /// until interrupted.
     MockAutopilot(MockArgs),
-    /// Compare a parameter file with a vehicle (`check`) or write it (`apply`).
+    /// Compare a parameter file with a vehicle (`check`), write it (`apply`), or save the
+    /// vehicle's parameters into one (`save`).
     Params(ParamsArgs),
     /// Detect AprilTags (tag36h11) in an image, a folder of images, or a video.
     Detect(DetectArgs),
@@ -53,6 +54,14 @@ enum Command {
     /// Calibrate a camera from chessboard views (a folder or a live camera) into the OpenCV
     /// YAML that `daemon.calibration` reads.
     Calibrate(calibrate::CalibrateArgs),
+    /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell),
+    /// e.g. `infotrack completions bash > /etc/bash_completion.d/infotrack`.
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff), e.g. `infotrack man > /usr/local/share/man/man1/infotrack.1`.
+    Man,
 }
 
 #[derive(clap::Args)]
@@ -124,7 +133,8 @@ struct MockArgs {
 
 #[derive(clap::Args)]
 struct ParamsArgs {
-    /// check or apply.
+    /// check (compare the file with the vehicle), apply (write it: all or nothing), or save
+    /// (download every parameter of the vehicle into the file: a backup before apply).
     action: String,
     /// A QGroundControl .params or Mission Planner .parm/.param file.
     file: PathBuf,
@@ -289,6 +299,17 @@ fn main() -> ExitCode {
         Command::MockAutopilot(a) => mock_autopilot(a),
         Command::Params(a) => params(a),
         Command::Calibrate(a) => calibrate::run(a),
+        Command::Completions { shell } => {
+            let mut cmd = <Cli as clap::CommandFactory>::command();
+            clap_complete::generate(shell, &mut cmd, "infotrack", &mut std::io::stdout());
+            Ok(())
+        }
+        Command::Man => {
+            let cmd = <Cli as clap::CommandFactory>::command();
+            clap_mangen::Man::new(cmd)
+                .render(&mut std::io::stdout())
+                .context("writing the manual page")
+        }
         Command::Config(a) => load_config(a.config.as_deref()).and_then(|c| {
             print!("{}", toml::to_string(&c).context("the config as TOML")?);
             Ok(())
@@ -612,12 +633,50 @@ async fn wait_for_signal() {
     }
 }
 
+/// `infotrack params save FILE`: every parameter of the vehicle into FILE (a backup before
+/// `apply`), in the format its extension names.
+fn params_save(a: ParamsArgs) -> Result<()> {
+    use infotrack::autopilot::{link, params_file, params_sync};
+    let format = params_file::ParamFormat::from_path(&a.file).with_context(|| {
+        format!(
+            "{}: unknown parameter file type (expected .params, .parm or .param)",
+            a.file.display()
+        )
+    })?;
+    let key = a
+        .signing_key
+        .as_deref()
+        .map(infotrack::autopilot::signing::SigningKey::load)
+        .transpose()?;
+    let text = runtime()?.block_on(async {
+        let mut lc = link::LinkConfig::new(&a.connect);
+        lc.signing_key = key;
+        let l = link::VehicleLink::connect(lc).await?;
+        l.wait_vehicle(std::time::Duration::from_secs_f64(a.timeout))
+            .await?;
+        let list = l.param_list(std::time::Duration::from_secs(2)).await;
+        if !list.complete {
+            bail!(
+                "the vehicle sent {} parameters but not all it counts: nothing was saved (a lossy link? try again)",
+                list.values.len()
+            );
+        }
+        let address = l.state().address.unwrap_or((1, 1));
+        println!("{} parameters of the {} vehicle", list.values.len(), l.flavor());
+        Ok::<String, anyhow::Error>(params_sync::render_backup(&list, format, address))
+    })?;
+    infotrack::report::write_file(&a.file, text.as_bytes())?;
+    println!("saved to {}", a.file.display());
+    Ok(())
+}
+
 fn params(a: ParamsArgs) -> Result<()> {
     use infotrack::autopilot::{link, params_file, params_sync};
     let apply = match a.action.as_str() {
         "check" => false,
         "apply" => true,
-        other => bail!("unknown params action `{other}` (check or apply)"),
+        "save" => return params_save(a),
+        other => bail!("unknown params action `{other}` (check, apply or save)"),
     };
     let file = params_file::read(&a.file)?;
     let key = a
@@ -638,6 +697,9 @@ fn params(a: ParamsArgs) -> Result<()> {
             params_sync::check(&l, &file).await
         };
         print!("{}", params_sync::render(&rows));
+        for line in params_sync::advice(&rows, l.flavor(), apply) {
+            println!("{line}");
+        }
         if let (false, Some(why)) = (params_sync::all_ok(&rows), l.signing_diagnosis()) {
             bail!("{file_name}: {why}");
         }

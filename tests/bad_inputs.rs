@@ -280,8 +280,8 @@ config_keys_refused! {
     unknown_key: "filter.particels", "500" => "particels";
     wrong_type: "filter.particles", "\"many\"" => "expected usize";
     vehicle_url_bad: "daemon.vehicle", "\"carrier-pigeon:1\"" => "daemon.vehicle";
-    world_file_missing: "world", "{ origin = [47.0, 8.0, 400.0], geojson = \"/nonexistent/world.geojson\" }" => "/nonexistent/world.geojson";
-    world_file_dev_zero: "world", "{ origin = [47.0, 8.0, 400.0], geojson = \"/dev/zero\" }" => "not a regular file";
+    world_file_missing: "world", "{ origin = { lat_deg = 47.0, lon_deg = 8.0, alt_m = 400.0 }, geojson = \"/nonexistent/world.geojson\" }" => "cannot read config file /nonexistent/world.geojson";
+    world_file_dev_zero: "world", "{ origin = { lat_deg = 47.0, lon_deg = 8.0, alt_m = 400.0 }, geojson = \"/dev/zero\" }" => "not a regular file";
 }
 
 #[test]
@@ -435,4 +435,29 @@ fn detect_pose_file_dev_zero_is_refused() {
         1,
         "/dev/zero",
     );
+}
+
+/// The version names the commit; completions and the manual page come from the command
+/// line's own definitions.
+#[test]
+fn version_completions_and_manual_page() {
+    let v = infotrack(&["--version"]);
+    let text = String::from_utf8_lossy(&v.stdout);
+    assert!(
+        text.starts_with("infotrack ") && text.contains("(commit "),
+        "{text}"
+    );
+    let bash = infotrack(&["completions", "bash"]);
+    let text = String::from_utf8_lossy(&bash.stdout);
+    assert!(
+        bash.status.success() && text.contains("mock-autopilot"),
+        "{text}"
+    );
+    let man = infotrack(&["man"]);
+    let text = String::from_utf8_lossy(&man.stdout);
+    assert!(
+        man.status.success() && text.contains(".TH infotrack"),
+        "{text}"
+    );
+    refused(&["completions", "tcsh"], 2, "tcsh");
 }

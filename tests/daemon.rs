@@ -574,6 +574,10 @@ async fn sigkill_mid_flight_leaves_parseable_records_up_to_the_last_second() {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert!(summary["tracking_error_m"].as_f64().unwrap().is_finite());
+    // The snapshot of a flight that never reached its clean end says so.
+    assert_eq!(summary["partial"], true, "{summary}");
+    // Whole rows only: the files end at a row's end.
+    assert!(text.ends_with('\n') && steps_csv.ends_with('\n'));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -166,6 +166,10 @@ fn closed_loop_reproduces_the_recorded_flights() {
             &std::fs::read_to_string(dir.path().join("summary.json")).unwrap(),
         )
         .unwrap();
+        assert_eq!(
+            summary["partial"], false,
+            "a flight to its clean end is whole"
+        );
         assert_metrics_equal(
             &format!("closed loop seed {seed}"),
             &run["metrics"],

@@ -52,6 +52,7 @@ fn round_trip(flavor: &str, file: &str) {
         String::from_utf8_lossy(&applied.stderr)
     );
     assert!(out.contains("applied") && !out.contains("FAILED"), "{out}");
+    assert!(out.contains("reboot the autopilot now"), "{out}");
     let after = params("check", &file, port);
     let out = String::from_utf8_lossy(&after.stdout);
     assert!(after.status.success(), "{out}");
@@ -195,4 +196,43 @@ async fn a_write_that_fails_midway_is_rolled_back() {
     assert!(all.contains("set back (a later write failed)"), "{all}");
     let now = mock.with(|m| m.params().get("MPC_XY_VEL_MAX", -1.0));
     assert_eq!(now, 12.0, "MPC_XY_VEL_MAX is back to its value before");
+}
+
+/// A name one letter off is suggested; a file for the other firmware is named as such.
+#[test]
+fn a_typo_and_the_other_firmwares_file_are_named() {
+    let (_m, port) = mock("ardupilot");
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("typo.parm");
+    std::fs::write(&f, "WPNAV_SPEEED,1500\n").unwrap();
+    let o = params("check", &f, port);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("did you mean WPNAV_SPEED?"), "{out}");
+    let px4_file = root().join("firmware-params/px4-offboard-tracking.params");
+    let o = params("check", &px4_file, port);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("not on this ArduPilot vehicle: is the file for PX4?"),
+        "{out}"
+    );
+}
+
+/// `params save` downloads every parameter, in the format the extension names, and the
+/// backup checks clean against the vehicle it came from.
+#[test]
+fn the_vehicles_parameters_are_saved_and_check_clean() {
+    for (flavor, name) in [("px4", "backup.params"), ("ardupilot", "backup.parm")] {
+        let (_m, port) = mock(flavor);
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join(name);
+        let o = params("save", &f, port);
+        let all = common::output_text(&o);
+        assert!(o.status.success(), "{all}");
+        let saved = infotrack::autopilot::params_file::read(&f).unwrap();
+        assert!(saved.len() > 20, "{flavor}: {} parameters", saved.len());
+        let o = params("check", &f, port);
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{flavor}: {out}");
+        assert!(out.contains(", 0 not as the file says"), "{flavor}: {out}");
+    }
 }

@@ -172,6 +172,17 @@ fn what_is_wrong_in_the_file_or_given_twice_is_named() {
         "{err}"
     );
 
+    // [latitude, longitude] swapped near 47 N 8 E: both in range, but 4,500 km away; the
+    // message names the feature once, the position, and the likely swap.
+    let mut bad = area();
+    bad["features"][4]["geometry"]["coordinates"] = json!([ORIGIN.lat_deg, ORIGIN.lon_deg]);
+    let err = refused(dir.path(), &bad);
+    assert!(
+        err.contains("feature 4: position") && err.contains("swapped?"),
+        "{err}"
+    );
+    assert_eq!(err.matches("feature 4").count(), 1, "{err}");
+
     // Probabilities leaving a node over 1.
     let mut bad = area();
     bad["features"][0]["properties"]["p"] = json!(0.9);

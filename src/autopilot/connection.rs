@@ -34,6 +34,9 @@ pub struct Connection {
     verifier: Option<SigningData>,
     counts: SigningCounts,
     inner: RwLock<Inner>,
+    /// Every message sent and received goes into this telemetry log: one place, whoever
+    /// sends.
+    tlog: Option<Arc<super::tlog::Tlog>>,
 }
 
 /// What the signing check has seen since the link opened.
@@ -67,7 +70,14 @@ impl Connection {
             verifier,
             counts: SigningCounts::default(),
             inner: RwLock::new(inner),
+            tlog: None,
         })
+    }
+
+    /// Records every message sent and received from now on in `tlog`.
+    pub fn with_tlog(mut self, tlog: Option<Arc<super::tlog::Tlog>>) -> Self {
+        self.tlog = tlog;
+        self
     }
 
     /// Opens the transport; signing is done by [`Connection::send`] and [`Connection::recv`].
@@ -85,6 +95,9 @@ impl Connection {
 
     /// Sends one message on the current connection, signed when we have a key.
     pub async fn send(&self, h: &MavHeader, m: &MavMessage) -> Result<usize, MessageWriteError> {
+        if let Some(t) = &self.tlog {
+            t.record(h, m);
+        }
         let c = self.inner.read().await.clone();
         match &self.verifier {
             None => c.send(h, m).await,
@@ -117,6 +130,9 @@ impl Connection {
                 raw.payload(),
             )
             .map_err(MessageReadError::Parse)?;
+            if let Some(t) = &self.tlog {
+                t.record(&header, &msg);
+            }
             return Ok((header, msg));
         }
     }

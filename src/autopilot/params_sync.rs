@@ -2,9 +2,11 @@
 
 use std::fmt::Write;
 
-use super::link::{LinkError, VehicleLink};
+use super::link::{LinkError, ParamList, VehicleLink};
 use super::params_file::{FileParam, ParamType};
 use std::time::Duration;
+
+use super::modes::Flavor;
 
 /// One row of the report.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,6 +21,8 @@ pub struct ParamRow {
     pub vehicle_value: Option<f64>,
     /// Outcome.
     pub status: ParamStatus,
+    /// For a name the vehicle lacks: the nearest one it has, when one is close (a typo).
+    pub did_you_mean: Option<String>,
 }
 
 /// How a parameter compares.
@@ -62,21 +66,62 @@ const LIST_SILENCE: Duration = Duration::from_secs(2);
 async fn read_all(
     link: &VehicleLink,
     params: &[FileParam],
-) -> Vec<Result<(f64, ParamType), ParamStatus>> {
+) -> (Vec<Result<(f64, ParamType), ParamStatus>>, ParamList) {
     let list = link.param_list(LIST_SILENCE).await;
     let mut out = Vec::with_capacity(params.len());
+    let mut asked = 0usize;
     for p in params {
-        out.push(match list.values.get(&p.name) {
-            Some(v) => Ok(*v),
-            None if list.complete => Err(ParamStatus::Missing),
-            None => match link.param_read(&p.name).await {
-                Ok(v) => Ok(v),
-                Err(LinkError::NoSuchParam(_)) => Err(ParamStatus::Missing),
-                Err(_) => Err(ParamStatus::NoAnswer),
-            },
+        if let Some(v) = list.values.get(&p.name) {
+            out.push(Ok(*v));
+            continue;
+        }
+        // PX4 lists only the parameters in use (MAV_1_MODE only once MAV_1_CONFIG enables
+        // the port) but answers for the others by name: a name the list lacks is asked for,
+        // once when the list came whole (the link works), up to MAX_ASKED names.
+        if asked >= MAX_ASKED {
+            out.push(Err(ParamStatus::Missing));
+            continue;
+        }
+        asked += 1;
+        let read = if list.complete {
+            link.param_read_tries(&p.name, 1).await
+        } else {
+            link.param_read(&p.name).await
+        };
+        out.push(match read {
+            Ok(v) => Ok(v),
+            Err(LinkError::NoSuchParam(_)) => Err(ParamStatus::Missing),
+            Err(_) if list.complete => Err(ParamStatus::Missing),
+            Err(_) => Err(ParamStatus::NoAnswer),
         });
     }
-    out
+    if asked >= MAX_ASKED {
+        tracing::warn!(
+            "more than {MAX_ASKED} of the file's names are not in the vehicle's list: the rest were not asked for by name"
+        );
+    }
+    (out, list)
+}
+
+/// Names outside the vehicle's list asked for one by one, at most (each may take an
+/// acknowledgement timeout).
+const MAX_ASKED: usize = 64;
+
+/// The vehicle's name nearest to `name`, if it is a likely typo of it.
+pub fn nearest_name(name: &str, list: &ParamList) -> Option<String> {
+    list.values
+        .keys()
+        .map(|k| (strsim::levenshtein(name, k), k))
+        .filter(|(d, _)| *d <= 2.max(name.len() / 5))
+        .min()
+        .map(|(_, k)| k.clone())
+}
+
+/// Fills `did_you_mean` for the rows the vehicle lacks.
+fn suggest(rows: &mut [ParamRow], list: &ParamList) {
+    for r in rows.iter_mut().filter(|r| r.status == ParamStatus::Missing) {
+        r.did_you_mean = nearest_name(&r.name, list);
+    }
 }
 
 fn row(p: &FileParam, vehicle_value: Option<f64>, status: ParamStatus) -> ParamRow {
@@ -86,13 +131,14 @@ fn row(p: &FileParam, vehicle_value: Option<f64>, status: ParamStatus) -> ParamR
         file_value: p.value,
         vehicle_value,
         status,
+        did_you_mean: None,
     }
 }
 
 /// Reads every parameter of the file from the vehicle.
 pub async fn check(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
-    let found = read_all(link, params).await;
-    params
+    let (found, list) = read_all(link, params).await;
+    let mut rows: Vec<ParamRow> = params
         .iter()
         .zip(found)
         .map(|(p, f)| match f {
@@ -100,7 +146,9 @@ pub async fn check(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
             Ok((v, _)) => row(p, Some(v), ParamStatus::Mismatch),
             Err(status) => row(p, None, status),
         })
-        .collect()
+        .collect();
+    suggest(&mut rows, &list);
+    rows
 }
 
 /// Writes every parameter of the file, with the type the vehicle reports for it: all or
@@ -108,8 +156,8 @@ pub async fn check(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
 /// the file's value, nothing is written and the report says which. If a write fails
 /// midway, the ones written before are set back to the values read before.
 pub async fn apply(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
-    let found: Vec<_> = read_all(link, params)
-        .await
+    let (found, list) = read_all(link, params).await;
+    let found: Vec<_> = found
         .into_iter()
         .zip(params)
         .map(|(f, p)| match f {
@@ -118,7 +166,7 @@ pub async fn apply(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
         })
         .collect();
     if found.iter().any(|f| f.is_err()) {
-        return params
+        let mut rows: Vec<ParamRow> = params
             .iter()
             .zip(found)
             .map(|(p, f)| match f {
@@ -126,6 +174,8 @@ pub async fn apply(link: &VehicleLink, params: &[FileParam]) -> Vec<ParamRow> {
                 Ok((v, _)) => row(p, Some(v), ParamStatus::NotWritten),
             })
             .collect();
+        suggest(&mut rows, &list);
+        return rows;
     }
     let before: Vec<(f64, ParamType)> = found.into_iter().flatten().collect();
     let mut rows: Vec<ParamRow> = Vec::with_capacity(params.len());
@@ -209,9 +259,13 @@ pub fn render(rows: &[ParamRow]) -> String {
             ParamStatus::RolledBack => "set back (a later write failed)",
             ParamStatus::RollbackFailed => "WRITTEN, SETTING BACK FAILED",
         };
+        let hint = r
+            .did_you_mean
+            .as_ref()
+            .map_or_else(String::new, |n| format!(" (did you mean {n}?)"));
         let _ = writeln!(
             s,
-            "{:<17} {:>5} {:>14} {:>14}  {status}",
+            "{:<17} {:>5} {:>14} {:>14}  {status}{hint}",
             r.name, r.line, r.file_value, v
         );
     }
@@ -221,4 +275,58 @@ pub fn render(rows: &[ParamRow]) -> String {
         .count();
     let _ = writeln!(s, "{} parameters, {} not as the file says", rows.len(), bad);
     s
+}
+
+/// What the operator should know after a report: a file for the other firmware, and the
+/// reboot some parameters need before they take effect.
+pub fn advice(rows: &[ParamRow], flavor: Flavor, applied: bool) -> Vec<String> {
+    let mut out = Vec::new();
+    let missing = rows
+        .iter()
+        .filter(|r| r.status == ParamStatus::Missing)
+        .count();
+    if missing * 2 > rows.len() {
+        let (this, other) = match flavor {
+            Flavor::Px4 => ("PX4", "ArduPilot"),
+            Flavor::ArduPilot => ("ArduPilot", "PX4"),
+        };
+        out.push(format!(
+            "{missing} of the file's {} parameters are not on this {this} vehicle: is the file for {other}?",
+            rows.len()
+        ));
+    }
+    let written = rows.iter().any(|r| r.status == ParamStatus::Applied);
+    if applied && written {
+        out.push(match flavor {
+            Flavor::ArduPilot => "reboot the autopilot now: ArduPilot reads some of these (the \
+                GUIDED speeds among them) only at boot"
+                .to_string(),
+            Flavor::Px4 => "reboot the autopilot now: PX4 applies some parameters (MAVLink and \
+                serial ports, the estimator's) only at boot"
+                .to_string(),
+        });
+    }
+    out
+}
+
+/// Every parameter of the vehicle, sorted by name, as a file of the format the path's
+/// extension names (`.params`: QGroundControl, `.parm`/`.param`: Mission Planner).
+pub fn render_backup(
+    list: &ParamList,
+    format: super::params_file::ParamFormat,
+    (sysid, compid): (u8, u8),
+) -> String {
+    let mut all: Vec<(String, f64, ParamType)> = list
+        .values
+        .iter()
+        .map(|(n, (v, t))| (n.clone(), *v, *t))
+        .collect();
+    all.sort_by(|a, b| a.0.cmp(&b.0));
+    match format {
+        super::params_file::ParamFormat::Qgc => super::params_file::render_qgc(&all, sysid, compid),
+        super::params_file::ParamFormat::MissionPlanner => {
+            let pairs: Vec<(String, f64)> = all.into_iter().map(|(n, v, _)| (n, v)).collect();
+            super::params_file::render_parm(&pairs)
+        }
+    }
 }

@@ -13,6 +13,7 @@ use crate::tracker::{Failsafe, LostFallback, Rates, TrackerParams, DEFAULT_CUE_M
 use crate::world::camera::Footprint;
 use crate::world::geometry::{Enu2, PolygonEnu};
 use crate::world::measurement::{Gaussian2, MeasurementModel};
+use crate::world::road::RoadNetwork;
 use crate::world::signature::{road_graph_sha256, SpeedEnvelope, WorldSignature};
 use crate::world::World;
 
@@ -22,11 +23,21 @@ impl Config {
     pub fn world(&self) -> World {
         World::new(
             self.workspace_enu,
-            &self.road,
+            self.road_network(),
             self.occlusion_polygons(),
             self.footprint(),
             MeasurementModel::new(self.measurement.noise_cov_m2),
         )
+    }
+
+    /// The road network. A loaded config's roads were checked to form one (`validate`); a
+    /// config changed in code since is checked again here, and one that no longer forms a
+    /// network is a bug in that code.
+    pub fn road_network(&self) -> RoadNetwork {
+        match RoadNetwork::try_from(&self.road) {
+            Ok(road) => road,
+            Err(e) => panic!("a config changed after it was validated: {e}"),
+        }
     }
 
     /// The camera's footprint at the tracking altitude.

@@ -572,7 +572,7 @@ fn validate_acquisition(c: &Config) -> Result<(), ConfigError> {
             ),
         ));
     }
-    let road = crate::world::road::RoadNetwork::from_config(&c.road);
+    let road = c.road_network();
     if road.length_within(Some((cue, a.cue_radius_m))) <= 0.0 {
         return Err(invalid(
             "acquisition.cue_enu_m",

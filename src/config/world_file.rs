@@ -150,7 +150,7 @@ fn read(text: &str, origin: &GeodeticWgs84) -> Result<WorldFromFile, String> {
             unused += 1;
             continue;
         };
-        let en = |p: &Position| enu_of(p, origin).map_err(at);
+        let en = |p: &Position| enu_of(p, origin);
         match kind.as_str() {
             Some("road") => roads.push(road_of(f, en).map_err(at)?),
             Some("occlusion") => out.occlusions.push(occlusion_of(f, en).map_err(at)?),
@@ -191,13 +191,36 @@ fn enu_of(p: &Position, origin: &GeodeticWgs84) -> Result<[f64; 2], String> {
             "position [{lon}, {lat}] is not [longitude, latitude] in degrees"
         ));
     }
-    let [e, n, _] = origin.enu_of(&GeodeticWgs84 {
-        lat_deg: lat,
-        lon_deg: lon,
+    let at = |lat_deg: f64, lon_deg: f64| GeodeticWgs84 {
+        lat_deg,
+        lon_deg,
         alt_m: origin.alt_m,
-    });
+    };
+    let here = at(lat, lon);
+    let far_m = origin.horizontal_distance_m(&here);
+    if far_m > FARTHEST_M {
+        // [latitude, longitude] written for [longitude, latitude] lands far away; swapped,
+        // it would be near.
+        let swapped_near =
+            lon.abs() <= 90.0 && origin.horizontal_distance_m(&at(lon, lat)) <= FARTHEST_M;
+        return Err(format!(
+            "position [{lon}, {lat}] is {:.0} km from the world's origin ({:.6}, {:.6}){}",
+            far_m / 1e3,
+            origin.lat_deg,
+            origin.lon_deg,
+            if swapped_near {
+                ": latitude and longitude swapped? GeoJSON positions are [longitude, latitude]"
+            } else {
+                ""
+            }
+        ));
+    }
+    let [e, n, _] = origin.enu_of(&here);
     Ok([e, n])
 }
+
+/// A world's features lie within this of its origin, m (a town is a few km across).
+const FARTHEST_M: f64 = 100_000.0;
 
 fn geometry(f: &Feature) -> Result<&GeometryValue, String> {
     f.geometry

@@ -96,10 +96,7 @@ pub(super) async fn check_world_origin(
             None => {}
         }
         if Instant::now() > until {
-            return Err(match disagreement {
-                Some(d) => DaemonError::OriginDisagrees(d),
-                None => DaemonError::NoVehicleOrigin(timeout_s),
-            });
+            return Err(disagreement.unwrap_or(DaemonError::NoVehicleOrigin(timeout_s)));
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
@@ -121,7 +118,7 @@ async fn ask_for_origin(link: &VehicleLink) {
 /// far off it is; `None`: not all of them have arrived yet.
 fn origin_agreement(
     s: &crate::autopilot::link::VehicleState,
-) -> Option<Result<crate::geodesy::GeodeticWgs84, String>> {
+) -> Option<Result<crate::geodesy::GeodeticWgs84, DaemonError>> {
     /// GLOBAL_POSITION_INT and LOCAL_POSITION_NED come from one estimator: they agree to
     /// centimetres, and a vehicle on the ground moves by less than this between the two, m.
     const AGREE_M: f64 = 5.0;
@@ -136,21 +133,21 @@ fn origin_agreement(
     let implied = origin.offset_by_enu([local.y_east_m, local.x_north_m, 0.0]);
     let off_m = implied.horizontal_distance_m(&here);
     if off_m > AGREE_M {
-        return Some(Err(format!(
+        return Some(Err(DaemonError::OriginDisagrees(format!(
             "GPS_GLOBAL_ORIGIN ({:.7}, {:.7}) moved by LOCAL_POSITION_NED lies {off_m:.1} m from \
              GLOBAL_POSITION_INT ({lat_deg:.7}, {lon_deg:.7})",
             origin.lat_deg, origin.lon_deg
-        )));
+        ))));
     }
     if let Some((home, home_local)) = s.home_position {
         let home_origin = home.offset_by_enu([-home_local.y_east_m, -home_local.x_north_m, 0.0]);
         let off_m = home_origin.horizontal_distance_m(&origin);
         if off_m > AGREE_M {
-            return Some(Err(format!(
+            return Some(Err(DaemonError::OriginDisagrees(format!(
                 "GPS_GLOBAL_ORIGIN ({:.7}, {:.7}) lies {off_m:.1} m from the origin HOME_POSITION \
                  implies ({:.7}, {:.7})",
                 origin.lat_deg, origin.lon_deg, home_origin.lat_deg, home_origin.lon_deg
-            )));
+            ))));
         }
     }
     Some(Ok(origin))

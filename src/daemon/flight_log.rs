@@ -9,9 +9,33 @@ use std::fmt::Write as _;
 
 use thiserror::Error;
 
-use super::pipeline::{Command, FlightRecord};
 use crate::frames::PositionNed;
+use crate::metrics::StepRecord;
+use crate::tracker::{Command, TrackState};
+use crate::vision::camera_model::VehiclePoseNed;
 use crate::world::geometry::Enu2;
+
+/// One filter step of the daemon, beyond what the simulator records.
+#[derive(Debug, Clone)]
+pub struct FlightRecord {
+    /// The simulator-compatible record (truth, vehicle position, measurement, estimate...).
+    pub step: StepRecord,
+    /// Vehicle pose at the frame.
+    pub pose: VehiclePoseNed,
+    /// Tracking state.
+    pub state: TrackState,
+    /// Whether a camera frame was taken at this step.
+    pub frame: bool,
+    /// The command in force after this step.
+    pub command: Option<Command>,
+    /// Entropy of the estimate at the latest EER decision (NaN before the first).
+    pub entropy: f64,
+    /// The flight mode the vehicle reported at this step.
+    pub vehicle_mode: Option<crate::autopilot::modes::Mode>,
+    /// Faults injected at this step (`camera-freeze`, `link-cut`, `loss=30`), `+`-joined;
+    /// empty: none.
+    pub faults: String,
+}
 
 /// The header row. Vehicle pose in MAVLink local NED (m, rad); measurement, estimate and
 /// command in world ENU (m); covariance in m^2; `entropy` at the latest EER decision;

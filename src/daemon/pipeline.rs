@@ -9,10 +9,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 
+pub use super::flight_log::FlightRecord;
 use super::heading;
 use crate::config::Config;
 use crate::guidance::GuidanceKind;
-use crate::metrics::StepRecord;
 use crate::rng::{stream_rng, Stream};
 use crate::simulated::{RenderedSensor, TargetSim, VisionSensor, VisionStats};
 pub use crate::tracker::{Command, TrackState};
@@ -119,28 +119,6 @@ impl Shared {
     pub fn pipeline_view(&self) -> PipelineView {
         *self.from_pipeline.lock().expect("shared poisoned")
     }
-}
-
-/// One filter step of the daemon, beyond what the simulator records.
-#[derive(Debug, Clone)]
-pub struct FlightRecord {
-    /// The simulator-compatible record (truth, vehicle position, measurement, estimate...).
-    pub step: StepRecord,
-    /// Vehicle pose at the frame.
-    pub pose: VehiclePoseNed,
-    /// Tracking state.
-    pub state: TrackState,
-    /// Whether a camera frame was taken at this step.
-    pub frame: bool,
-    /// The command in force after this step.
-    pub command: Option<Command>,
-    /// Entropy of the estimate at the latest EER decision (NaN before the first).
-    pub entropy: f64,
-    /// The flight mode the vehicle reported at this step.
-    pub vehicle_mode: Option<crate::autopilot::modes::Mode>,
-    /// Faults injected at this step (`camera-freeze`, `link-cut`, `loss=30`), `+`-joined;
-    /// empty: none.
-    pub faults: String,
 }
 
 /// What the pipeline produced.
@@ -412,11 +390,15 @@ impl Pipeline {
         let world = cfg.world();
         let mut rng_target = stream_rng(seed, 0, Stream::Target, 0);
         let rng_meas = stream_rng(seed, 0, Stream::Measurement, 0);
+        let params = cfg.tracker_params(GuidanceKind::Eer, true);
+        let model = EstimatorKind::parse(motion_name)?
+            .build(&params.motion)
+            .map_err(crate::tracker::TrackerError::from)?;
         let tracker = Tracker::new(
-            cfg.tracker_params(GuidanceKind::Eer, true),
+            params,
             // Synthetic or real, the daemon's camera measures through the detector.
             cfg.world_seen_by_detector(),
-            &EstimatorKind::parse(motion_name)?,
+            model,
             stream_rng(seed, 0, Stream::Filter, 0),
             stream_rng(seed, 0, Stream::Guidance, 0),
         )?;

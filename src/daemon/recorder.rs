@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use super::flight_log;
-use super::pipeline::FlightRecord;
+use super::flight_log::FlightRecord;
 use crate::metrics::{RunSummary, StepRecord};
 use crate::tracker::TrackState;
 

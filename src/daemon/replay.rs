@@ -56,10 +56,14 @@ pub fn replay(
     steps: &[LoggedStep],
 ) -> Result<ReplayReport, ReplayError> {
     // The streams the pipeline used, in the order it drew from them.
+    let params = cfg.tracker_params(GuidanceKind::Eer, false);
+    let model = EstimatorKind::parse(motion_name)?
+        .build(&params.motion)
+        .map_err(crate::tracker::TrackerError::from)?;
     let mut tracker = Tracker::new(
-        cfg.tracker_params(GuidanceKind::Eer, false),
+        params,
         cfg.world_seen_by_detector(),
-        &EstimatorKind::parse(motion_name)?,
+        model,
         stream_rng(seed, 0, Stream::Filter, 0),
         stream_rng(seed, 0, Stream::Guidance, 0),
     )?;

@@ -126,10 +126,15 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
         0.0
     };
     let seen = world.clone().with_detection_margin(margin_m);
+    let params = cfg.tracker_params(spec.guidance, false);
+    let model = spec
+        .estimator
+        .build(&params.motion)
+        .map_err(crate::tracker::TrackerError::from)?;
     let tracker = Tracker::new(
-        cfg.tracker_params(spec.guidance, false),
+        params,
         seen,
-        &spec.estimator,
+        model,
         stream_rng(spec.seed, spec.run_index, Stream::Filter, method),
         stream_rng(spec.seed, spec.run_index, Stream::Guidance, method),
     )?;

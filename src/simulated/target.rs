@@ -70,7 +70,7 @@ mod tests {
     #[test]
     fn target_stays_on_the_roads_and_visits_nodes() {
         let c = Config::default_lab();
-        let road = RoadNetwork::from_config(&c.road);
+        let road = RoadNetwork::from_config(&c.road).unwrap();
         let mut rng = CoreRng::seed_from_u64(1);
         let mut t = TargetSim::new(&road, c.target.clone(), &mut rng);
         let edges = road.edges_enu();

@@ -50,6 +50,46 @@ impl EstimatorKind {
     }
 }
 
+/// What a tracker estimates with, ready: a particle filter's motion model (built by the
+/// caller, which may read a learned model's file), or the Kalman filter.
+pub enum EstimatorModel {
+    /// A particle filter predicting with `model`.
+    Particle {
+        /// The model's `--motion` name (for messages).
+        name: String,
+        /// The model.
+        model: Box<dyn MotionModel>,
+    },
+    /// The constant-velocity Kalman filter.
+    Kalman,
+}
+
+impl EstimatorModel {
+    /// The `--motion` name.
+    pub fn name(&self) -> &str {
+        match self {
+            Self::Particle { name, .. } => name,
+            Self::Kalman => "kf",
+        }
+    }
+}
+
+impl EstimatorKind {
+    /// Builds the named estimator's model (the DMMN reads its ONNX file and metadata).
+    pub fn build(
+        &self,
+        params: &motion::MotionParams,
+    ) -> Result<EstimatorModel, motion::MotionError> {
+        Ok(match self {
+            Self::Particle(name) => EstimatorModel::Particle {
+                name: name.clone(),
+                model: motion::build(name, params)?,
+            },
+            Self::Kalman => EstimatorModel::Kalman,
+        })
+    }
+}
+
 /// A built estimator.
 pub enum Estimator {
     /// Particle filter and the model it predicts with.

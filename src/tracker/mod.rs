@@ -22,7 +22,7 @@ mod plan;
 use plan::approach_velocity;
 
 pub use clock::{Clock, FrozenClock, MonotonicClock};
-pub use estimator::{Estimator, EstimatorKind, UnknownEstimator};
+pub use estimator::{Estimator, EstimatorKind, EstimatorModel, UnknownEstimator};
 pub use ports::{
     Command, Decision, Observation, Prior, Sensor, StepOutcome, TickInput, TickOutput, TrackState,
 };
@@ -37,7 +37,7 @@ use crate::guidance::{
     ViewHeading,
 };
 use crate::metrics::StepRecord;
-use crate::motion::{self, MotionError, MotionParams};
+use crate::motion::{MotionError, MotionParams};
 use crate::rng::CoreRng;
 use crate::world::camera::View;
 use crate::world::road::RoadWeighting;
@@ -195,10 +195,15 @@ pub enum TickError<E> {
 
 /// Checks that a guidance law can run with an estimator.
 pub fn check_combination(g: GuidanceKind, e: &EstimatorKind) -> Result<(), TrackerError> {
-    if g.needs_particles() && *e == EstimatorKind::Kalman {
+    check_needs(g, e.name(), *e == EstimatorKind::Kalman)
+}
+
+/// [`check_combination`] for an estimator by its name and whether it is the Kalman filter.
+fn check_needs(g: GuidanceKind, name: &str, kalman: bool) -> Result<(), TrackerError> {
+    if g.needs_particles() && kalman {
         return Err(TrackerError::Incompatible {
             guidance: g,
-            motion: e.name().to_string(),
+            motion: name.to_string(),
             reason: format!("{g} needs a particle set and `--motion kf` has none"),
         });
     }
@@ -247,18 +252,20 @@ pub struct Tracker {
 }
 
 impl Tracker {
-    /// Builds the estimator (drawing the initial particles from `rng_filter`) and the
-    /// guidance; `rng_guidance` feeds EER's sampling.
+    /// Builds the estimator around its ready model (drawing the initial particles from
+    /// `rng_filter`) and the guidance; `rng_guidance` feeds EER's sampling. Reads no file:
+    /// the caller builds the model ([`EstimatorKind::build`]).
     pub fn new(
         params: TrackerParams,
         world: World,
-        estimator: &EstimatorKind,
+        estimator: EstimatorModel,
         mut rng_filter: CoreRng,
         rng_guidance: CoreRng,
     ) -> Result<Self, TrackerError> {
-        check_combination(params.guidance, estimator)?;
+        let kalman = matches!(estimator, EstimatorModel::Kalman);
+        check_needs(params.guidance, estimator.name(), kalman)?;
         let built = match estimator {
-            EstimatorKind::Particle(name) => Estimator::Particle {
+            EstimatorModel::Particle { model, .. } => Estimator::Particle {
                 pf: Box::new(match params.cue {
                     Some(cue) => ParticleFilter::on_weighted_roads(
                         params.filter.clone(),
@@ -276,13 +283,13 @@ impl Tracker {
                         &mut rng_filter,
                     ),
                 }),
-                model: motion::build(name, &params.motion)?,
+                model,
             },
-            EstimatorKind::Kalman => {
+            EstimatorModel::Kalman => {
                 Estimator::Kalman(Box::new(KalmanFilter::new(params.kalman.clone())))
             }
         };
-        let side_kf = (params.guidance == GuidanceKind::Kf && *estimator != EstimatorKind::Kalman)
+        let side_kf = (params.guidance == GuidanceKind::Kf && !kalman)
             .then(|| KalmanFilter::new(params.kalman.clone()));
         Ok(Self {
             schedule: Schedule::new(params.rates),

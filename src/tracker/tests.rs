@@ -39,10 +39,15 @@ fn tracker_with(
     motion: &str,
     seed: u64,
 ) -> Tracker {
+    let params = c.tracker_params(guidance, failsafe);
+    let model = EstimatorKind::parse(motion)
+        .unwrap()
+        .build(&params.motion)
+        .unwrap();
     Tracker::new(
-        c.tracker_params(guidance, failsafe),
+        params,
         c.world(),
-        &EstimatorKind::parse(motion).unwrap(),
+        model,
         stream_rng(seed, 0, Stream::Filter, 0),
         stream_rng(seed, 0, Stream::Guidance, 0),
     )
@@ -217,7 +222,7 @@ fn eer_with_a_kalman_estimator_is_refused_with_a_reason() {
     let err = Tracker::new(
         c.tracker_params(GuidanceKind::Eer, false),
         c.world(),
-        &EstimatorKind::Kalman,
+        EstimatorModel::Kalman,
         stream_rng(1, 0, Stream::Filter, 0),
         stream_rng(1, 0, Stream::Guidance, 0),
     )

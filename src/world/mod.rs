@@ -33,17 +33,18 @@ pub struct World {
 
 impl World {
     /// Builds the world from its parts (the configuration assembles them: see
-    /// `Config::world`).
+    /// `Config::world`); the road network is built fallibly beforehand
+    /// (`RoadNetwork::try_from`).
     pub fn new(
         workspace_enu: BoundsEnu,
-        road: &road::RoadConfig,
+        road: RoadNetwork,
         occlusions: Vec<PolygonEnu>,
         footprint: Footprint,
         measurement: MeasurementModel,
     ) -> Self {
         Self {
             workspace_enu,
-            road: RoadNetwork::from_config(road),
+            road,
             occlusions,
             footprint,
             measurement,

@@ -83,26 +83,61 @@ pub struct RoadNetwork {
 }
 
 impl RoadNetwork {
-    /// From a validated configuration.
-    pub fn from_config(c: &RoadConfig) -> Self {
-        let index = |id: u32| c.nodes.iter().position(|n| n.id == id).expect("validated");
+    /// From a configuration: every edge's ends and the start must be nodes of it.
+    pub fn from_config(c: &RoadConfig) -> Result<Self, RoadError> {
+        Self::try_from(c)
+    }
+}
+
+/// A road configuration that is not a network.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RoadError {
+    /// An edge or the start names a node that is not there.
+    #[error("road.{what} names node {id}, which is not one of road.nodes")]
+    UnknownNode {
+        /// Where the id is used (`edges[3].to`, `start_node`).
+        what: String,
+        /// The id.
+        id: u32,
+    },
+}
+
+impl TryFrom<&RoadConfig> for RoadNetwork {
+    type Error = RoadError;
+
+    fn try_from(c: &RoadConfig) -> Result<Self, RoadError> {
+        let index = |id: u32, what: &dyn Fn() -> String| {
+            c.nodes
+                .iter()
+                .position(|n| n.id == id)
+                .ok_or_else(|| RoadError::UnknownNode { what: what(), id })
+        };
+        let mut next = vec![Vec::new(); c.nodes.len()];
+        for (k, e) in c.edges.iter().enumerate() {
+            let from = index(e.from, &|| format!("edges[{k}].from"))?;
+            next[from].push((index(e.to, &|| format!("edges[{k}].to"))?, e.p));
+        }
         let nodes = c
             .nodes
             .iter()
-            .map(|n| RoadNode {
+            .zip(next)
+            .map(|(n, next)| RoadNode {
                 id: n.id,
                 position_enu: Enu2::new(n.x_m, n.y_m),
-                next: c
-                    .edges
-                    .iter()
-                    .filter(|e| e.from == n.id)
-                    .map(|e| (index(e.to), e.p))
-                    .collect(),
+                next,
             })
             .collect();
+        let start = index(c.start_node, &|| "start_node".to_string())?;
+        Ok(RoadNetwork::assemble(nodes, start))
+    }
+}
+
+impl RoadNetwork {
+    /// The network from its nodes (with their exits) and start: segments, traffic, graph.
+    fn assemble(nodes: Vec<RoadNode>, start: usize) -> Self {
         let mut road = Self {
             nodes,
-            start: index(c.start_node),
+            start,
             segments: Vec::new(),
             near_tolerance_m: f64::INFINITY,
             graph: Default::default(),

@@ -24,8 +24,8 @@ fn boot_clock(s: &mut VehicleState, events: &broadcast::Sender<LinkEvent>, t_ms:
     s.time_boot_ms = Some(s.time_boot_ms.map_or(t_ms, |l| l.max(t_ms)));
 }
 
-// Long because it is one dispatch over the MAVLink messages the link reads, one short arm
-// each, so what updates the vehicle state is in one place.
+/// One received message into the vehicle state: only the locked vehicle's messages (any
+/// autopilot's heartbeat, to lock onto one), only finite and plausible telemetry.
 pub(super) fn on_message(
     state: &Mutex<VehicleState>,
     events: &broadcast::Sender<LinkEvent>,
@@ -33,7 +33,6 @@ pub(super) fn on_message(
     h: &MavHeader,
     m: &MavMessage,
 ) {
-    let me = ids.me;
     let now = Instant::now();
     let mut s = state.lock().expect("state poisoned");
     let sender = (h.system_id as u8, h.component_id);
@@ -41,6 +40,21 @@ pub(super) fn on_message(
     if !from_vehicle && !matches!(m, MavMessage::HEARTBEAT(_)) {
         return;
     }
+    if !admit_telemetry(&mut s, now, m) {
+        return;
+    }
+    match m {
+        MavMessage::HEARTBEAT(hb) => on_heartbeat(&mut s, events, ids, sender, hb, now),
+        MavMessage::COMMAND_ACK(a) => on_ack(events, ids.me, a),
+        MavMessage::PARAM_VALUE(p) => on_param_value(events, p),
+        MavMessage::STATUSTEXT(t) => on_statustext(events, t),
+        other => on_telemetry(&mut s, events, other, now),
+    }
+}
+
+/// Whether `m` may update the state: NaN/infinite and implausible telemetry is dropped and
+/// counted, said at powers of two.
+fn admit_telemetry(s: &mut VehicleState, now: Instant, m: &MavMessage) -> bool {
     if non_finite_telemetry(m) {
         s.non_finite_dropped += 1;
         if s.non_finite_dropped.is_power_of_two() {
@@ -50,7 +64,7 @@ pub(super) fn on_message(
                 mavlink::Message::message_name(m)
             );
         }
-        return;
+        return false;
     }
     if let Err(why) = plausible_telemetry(&mut s.plausibility, now, m) {
         s.implausible_dropped += 1;
@@ -62,134 +76,142 @@ pub(super) fn on_message(
                 why.0
             );
         }
+        return false;
+    }
+    true
+}
+
+/// An autopilot's heartbeat: locks onto the vehicle, follows its link, arming and mode.
+fn on_heartbeat(
+    s: &mut VehicleState,
+    events: &broadcast::Sender<LinkEvent>,
+    ids: Ids,
+    sender: (u8, u8),
+    hb: &HEARTBEAT_DATA,
+    now: Instant,
+) {
+    let flavor = match hb.autopilot {
+        MavAutopilot::MAV_AUTOPILOT_PX4 => Flavor::Px4,
+        MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Flavor::ArduPilot,
+        _ => return, // a GCS, a camera, another companion
+    };
+    if !lock_onto(s, ids.vehicle, sender) {
         return;
     }
+    s.flavor = Some(flavor);
+    s.last_heartbeat = Some(now);
+    if s.lost {
+        s.lost = false;
+        tracing::info!("vehicle heartbeat back");
+        let _ = events.send(LinkEvent::VehicleBack);
+    }
+    s.armed = hb
+        .base_mode
+        .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+    s.has_armed |= s.armed;
+    let mode = Mode::from_custom_mode(flavor, hb.custom_mode);
+    if let Some(old) = s.mode.filter(|old| *old != mode) {
+        // A command explains one change: a later return to the same mode by the vehicle
+        // itself (PX4 back to OFFBOARD after a failsafe) is its own.
+        let commanded = s.commanded_mode == Some(mode);
+        if commanded {
+            s.commanded_mode = None;
+        } else {
+            note_own_mode_change(s, old, mode);
+        }
+        let _ = events.send(LinkEvent::ModeChanged {
+            from: old,
+            to: mode,
+            commanded,
+        });
+    }
+    s.mode = Some(mode);
+}
+
+/// A COMMAND_ACK: ours (or everyone's) goes to the waiting command.
+fn on_ack(events: &broadcast::Sender<LinkEvent>, me: (u8, u8), a: &COMMAND_ACK_DATA) {
+    let ours = (a.target_system == 0 || a.target_system == me.0)
+        && (a.target_component == 0 || a.target_component == me.1);
+    if ours {
+        let _ = events.send(LinkEvent::Ack {
+            command: a.command,
+            result: a.result,
+        });
+    }
+}
+
+/// A PARAM_VALUE, to whoever reads or sets parameters.
+fn on_param_value(events: &broadcast::Sender<LinkEvent>, p: &PARAM_VALUE_DATA) {
+    let _ = events.send(LinkEvent::Param {
+        name: p
+            .param_id
+            .to_str()
+            .unwrap_or("")
+            .trim_end_matches('\0')
+            .to_string(),
+        wire: p.param_value,
+        ty: param_type_of(p.param_type),
+        index: p.param_index,
+        count: p.param_count,
+    });
+}
+
+/// A STATUSTEXT: logged and published.
+fn on_statustext(events: &broadcast::Sender<LinkEvent>, t: &STATUSTEXT_DATA) {
+    let text = t
+        .text
+        .to_str()
+        .unwrap_or("")
+        .trim_end_matches('\0')
+        .to_string();
+    tracing::info!("vehicle: {text}");
+    let _ = events.send(LinkEvent::Text(text));
+}
+
+/// Position, attitude, origin, home, landed state and battery into the state.
+fn on_telemetry(
+    s: &mut VehicleState,
+    events: &broadcast::Sender<LinkEvent>,
+    m: &MavMessage,
+    now: Instant,
+) {
+    let wgs84 = |lat_e7: i32, lon_e7: i32, alt_mm: i32| crate::geodesy::GeodeticWgs84 {
+        lat_deg: lat_e7 as f64 * 1e-7,
+        lon_deg: lon_e7 as f64 * 1e-7,
+        alt_m: alt_mm as f64 * 1e-3,
+    };
     match m {
-        MavMessage::HEARTBEAT(hb) => {
-            let flavor = match hb.autopilot {
-                MavAutopilot::MAV_AUTOPILOT_PX4 => Flavor::Px4,
-                MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Flavor::ArduPilot,
-                _ => return, // a GCS, a camera, another companion
-            };
-            if !lock_onto(&mut s, ids.vehicle, sender) {
-                return;
-            }
-            s.flavor = Some(flavor);
-            s.last_heartbeat = Some(now);
-            if s.lost {
-                s.lost = false;
-                tracing::info!("vehicle heartbeat back");
-                let _ = events.send(LinkEvent::VehicleBack);
-            }
-            s.armed = hb
-                .base_mode
-                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
-            s.has_armed |= s.armed;
-            let mode = Mode::from_custom_mode(flavor, hb.custom_mode);
-            if let Some(old) = s.mode {
-                if old != mode {
-                    // A command explains one change: a later return to the same mode by
-                    // the vehicle itself (PX4 back to OFFBOARD after a failsafe) is its own.
-                    let commanded = s.commanded_mode == Some(mode);
-                    if commanded {
-                        s.commanded_mode = None;
-                    } else {
-                        note_own_mode_change(&mut s, old, mode);
-                    }
-                    let _ = events.send(LinkEvent::ModeChanged {
-                        from: old,
-                        to: mode,
-                        commanded,
-                    });
-                }
-            }
-            s.mode = Some(mode);
-        }
-        MavMessage::COMMAND_ACK(a) => {
-            // ACKs addressed to someone else are not ours.
-            let ours = (a.target_system == 0 || a.target_system == me.0)
-                && (a.target_component == 0 || a.target_component == me.1);
-            if ours {
-                let _ = events.send(LinkEvent::Ack {
-                    command: a.command,
-                    result: a.result,
-                });
-            }
-        }
         MavMessage::LOCAL_POSITION_NED(p) => {
-            boot_clock(&mut s, events, p.time_boot_ms);
-            s.local_ned = Some((
-                now,
-                PositionNed {
-                    x_north_m: p.x as f64,
-                    y_east_m: p.y as f64,
-                    z_down_m: p.z as f64,
-                },
-                [p.vx, p.vy, p.vz],
-            ));
+            boot_clock(s, events, p.time_boot_ms);
+            let position = PositionNed {
+                x_north_m: p.x as f64,
+                y_east_m: p.y as f64,
+                z_down_m: p.z as f64,
+            };
+            s.local_ned = Some((now, position, [p.vx, p.vy, p.vz]));
         }
         MavMessage::ATTITUDE(a) => {
-            boot_clock(&mut s, events, a.time_boot_ms);
+            boot_clock(s, events, a.time_boot_ms);
             s.attitude = Some((now, [a.roll, a.pitch, a.yaw]));
         }
         MavMessage::GLOBAL_POSITION_INT(g) => {
-            s.global = Some((
-                now,
-                g.lat as f64 * 1e-7,
-                g.lon as f64 * 1e-7,
-                g.relative_alt as f64 * 1e-3,
-            ));
+            let relative_m = g.relative_alt as f64 * 1e-3;
+            s.global = Some((now, g.lat as f64 * 1e-7, g.lon as f64 * 1e-7, relative_m));
             s.home_alt_amsl_m = Some((g.alt as f64 - g.relative_alt as f64) * 1e-3);
         }
         MavMessage::EXTENDED_SYS_STATE(e) => s.landed = Some((now, e.landed_state)),
-        MavMessage::GPS_GLOBAL_ORIGIN(o) => on_origin(
-            &mut s,
-            events,
-            crate::geodesy::GeodeticWgs84 {
-                lat_deg: o.latitude as f64 * 1e-7,
-                lon_deg: o.longitude as f64 * 1e-7,
-                alt_m: o.altitude as f64 * 1e-3,
-            },
-        ),
+        MavMessage::GPS_GLOBAL_ORIGIN(o) => {
+            on_origin(s, events, wgs84(o.latitude, o.longitude, o.altitude))
+        }
         MavMessage::HOME_POSITION(hp) => {
-            s.home_position = Some((
-                crate::geodesy::GeodeticWgs84 {
-                    lat_deg: hp.latitude as f64 * 1e-7,
-                    lon_deg: hp.longitude as f64 * 1e-7,
-                    alt_m: hp.altitude as f64 * 1e-3,
-                },
-                PositionNed {
-                    x_north_m: hp.x as f64,
-                    y_east_m: hp.y as f64,
-                    z_down_m: hp.z as f64,
-                },
-            ))
+            let local = PositionNed {
+                x_north_m: hp.x as f64,
+                y_east_m: hp.y as f64,
+                z_down_m: hp.z as f64,
+            };
+            s.home_position = Some((wgs84(hp.latitude, hp.longitude, hp.altitude), local));
         }
         MavMessage::SYS_STATUS(st) => s.battery_v = Some((now, st.voltage_battery as f64 * 1e-3)),
-        MavMessage::PARAM_VALUE(p) => {
-            let _ = events.send(LinkEvent::Param {
-                name: p
-                    .param_id
-                    .to_str()
-                    .unwrap_or("")
-                    .trim_end_matches('\0')
-                    .to_string(),
-                wire: p.param_value,
-                ty: param_type_of(p.param_type),
-                index: p.param_index,
-                count: p.param_count,
-            });
-        }
-        MavMessage::STATUSTEXT(t) => {
-            let text = t
-                .text
-                .to_str()
-                .unwrap_or("")
-                .trim_end_matches('\0')
-                .to_string();
-            tracing::info!("vehicle: {text}");
-            let _ = events.send(LinkEvent::Text(text));
-        }
         _ => {}
     }
 }

@@ -205,7 +205,6 @@ impl LinkConfig {
     }
 }
 
-type SharedTlog = Option<Arc<super::tlog::Tlog>>;
 type SharedState = Arc<Mutex<VehicleState>>;
 
 /// The ICAO address the target estimate is reported under (`send_target_on_map`): in the
@@ -372,16 +371,6 @@ impl VehicleLink {
             url: cfg.url.clone(),
             message: e.0,
         })?;
-        let conn = Connection::open(
-            &cfg.url,
-            cfg.signing_key.clone().map(|k| (k, cfg.signing_link_id)),
-        )
-        .await
-        .map_err(|e| LinkError::Connect {
-            url: cfg.url.clone(),
-            message: e.to_string(),
-        })?;
-        let conn = Arc::new(conn);
         let tlog = match &cfg.tlog {
             Some(p) => Some(Arc::new(super::tlog::Tlog::create(p).map_err(|e| {
                 LinkError::Connect {
@@ -391,6 +380,17 @@ impl VehicleLink {
             })?)),
             None => None,
         };
+        let conn = Connection::open(
+            &cfg.url,
+            cfg.signing_key.clone().map(|k| (k, cfg.signing_link_id)),
+        )
+        .await
+        .map_err(|e| LinkError::Connect {
+            url: cfg.url.clone(),
+            message: e.to_string(),
+        })?
+        .with_tlog(tlog.clone());
+        let conn = Arc::new(conn);
         let state = Arc::new(Mutex::new(VehicleState {
             plausibility: Plausibility {
                 envelope: cfg.envelope,
@@ -415,7 +415,6 @@ impl VehicleLink {
         let me = (cfg.system_id, cfg.component_id);
         let reader = spawn_reader(
             conn.clone(),
-            tlog.clone(),
             state.clone(),
             events.clone(),
             Ids {
@@ -423,13 +422,11 @@ impl VehicleLink {
                 vehicle: cfg.vehicle,
             },
         );
-        let heartbeat =
-            spawn_heartbeat(conn.clone(), tlog.clone(), heartbeat_paused.clone(), header);
+        let heartbeat = spawn_heartbeat(conn.clone(), heartbeat_paused.clone(), header);
         let watchdog = spawn_watchdog(state.clone(), events.clone(), cfg.heartbeat_timeout);
         let period = Duration::from_secs_f64(1.0 / cfg.setpoint_hz.max(1.0));
         let stream = spawn_streamer(
             conn.clone(),
-            tlog.clone(),
             streamer.clone(),
             state.clone(),
             header,
@@ -516,9 +513,6 @@ impl VehicleLink {
     }
 
     async fn send(&self, m: &MavMessage) -> Result<(), LinkError> {
-        if let Some(t) = &self.tlog {
-            t.record(&self.header(), m);
-        }
         self.conn
             .send(&self.header(), m)
             .await

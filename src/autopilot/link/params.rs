@@ -69,9 +69,18 @@ impl VehicleLink {
 
     /// Reads one parameter by name.
     pub async fn param_read(&self, name: &str) -> Result<(f64, ParamType), LinkError> {
+        self.param_read_tries(name, self.cfg.attempts).await
+    }
+
+    /// Reads one parameter by name, asking at most `tries` times.
+    pub async fn param_read_tries(
+        &self,
+        name: &str,
+        tries: u32,
+    ) -> Result<(f64, ParamType), LinkError> {
         let (ts, tc) = self.target();
         let mut rx = self.events.subscribe();
-        for _ in 0..self.cfg.attempts {
+        for _ in 0..tries.max(1) {
             self.send(&MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
                 param_index: -1,
                 target_system: ts,

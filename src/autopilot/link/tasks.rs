@@ -6,7 +6,6 @@ use super::*;
 /// The reader: every message into the tlog and the vehicle state; a dead stream reopened.
 pub(super) fn spawn_reader(
     conn: Arc<Connection>,
-    tlog: SharedTlog,
     state: SharedState,
     events: broadcast::Sender<LinkEvent>,
     ids: Ids,
@@ -14,12 +13,7 @@ pub(super) fn spawn_reader(
     tokio::spawn(async move {
         loop {
             match conn.recv().await {
-                Ok((h, m)) => {
-                    if let Some(t) = &tlog {
-                        t.record(&h, &m);
-                    }
-                    on_message(&state, &events, ids, &h, &m)
-                }
+                Ok((h, m)) => on_message(&state, &events, ids, &h, &m),
                 Err(e) if conn.reopens() && is_dead_stream(&e) => {
                     tracing::error!("link: {e}: the connection is gone; reopening");
                     conn.reopen(|| false).await;
@@ -36,7 +30,6 @@ pub(super) fn spawn_reader(
 /// Our heartbeat, once a second (unless paused by a test of the vehicle's failsafe).
 pub(super) fn spawn_heartbeat(
     conn: Arc<Connection>,
-    tlog: SharedTlog,
     paused: Arc<AtomicBool>,
     header: MavHeader,
 ) -> tokio::task::JoinHandle<()> {
@@ -55,9 +48,6 @@ pub(super) fn spawn_heartbeat(
                 system_status: MavState::MAV_STATE_ACTIVE,
                 mavlink_version: 3,
             });
-            if let Some(t) = &tlog {
-                t.record(&header, &hb);
-            }
             let _ = conn.send(&header, &hb).await;
         }
     })
@@ -87,7 +77,6 @@ pub(super) fn spawn_watchdog(
 /// The setpoint stream: the current target every `period`, unless paused.
 pub(super) fn spawn_streamer(
     conn: Arc<Connection>,
-    tlog: SharedTlog,
     streamer: Arc<Streamer>,
     state: SharedState,
     header: MavHeader,
@@ -118,9 +107,6 @@ pub(super) fn spawn_streamer(
                 target_sp.yaw_ned,
                 start.elapsed().as_millis() as u32,
             );
-            if let Some(t) = &tlog {
-                t.record(&header, &m);
-            }
             let _ = conn.send(&header, &m).await;
         }
     })

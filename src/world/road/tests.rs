@@ -7,7 +7,7 @@ use rand::SeedableRng;
 /// The road network of a shipped config, given its text and its path.
 fn road_of(toml: &str, path: &str) -> RoadNetwork {
     let cfg = Config::from_toml_str(toml, std::path::Path::new(path)).unwrap();
-    RoadNetwork::from_config(&cfg.road)
+    RoadNetwork::from_config(&cfg.road).unwrap()
 }
 
 fn outdoor_road() -> RoadNetwork {
@@ -213,7 +213,7 @@ fn a_heading_never_moves_a_point_to_a_far_road() {
 
 #[test]
 fn transitions_follow_their_probabilities() {
-    let road = RoadNetwork::from_config(&Config::default_lab().road);
+    let road = RoadNetwork::from_config(&Config::default_lab().road).unwrap();
     let a = road.nodes.iter().position(|n| n.id == 1).unwrap();
     let b = road.nodes.iter().position(|n| n.id == 2).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
@@ -228,7 +228,7 @@ fn transitions_follow_their_probabilities() {
 
 #[test]
 fn edges_connect_configured_nodes() {
-    let road = RoadNetwork::from_config(&Config::default_lab().road);
+    let road = RoadNetwork::from_config(&Config::default_lab().road).unwrap();
     assert_eq!(road.edges_enu().len(), 7);
     assert_eq!(road.nodes[road.start].id, 1);
 }
@@ -239,7 +239,7 @@ fn distance_to_roads(road: &RoadNetwork, p: &Enu2) -> f64 {
 
 #[test]
 fn points_on_the_roads_lie_on_an_edge_inside_the_region_in_its_direction() {
-    let road = RoadNetwork::from_config(&Config::default_lab().road);
+    let road = RoadNetwork::from_config(&Config::default_lab().road).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
     let region = (Enu2::new(0.35, 0.2), 0.5);
     for _ in 0..2000 {
@@ -264,7 +264,7 @@ fn points_on_the_roads_lie_on_an_edge_inside_the_region_in_its_direction() {
 
 #[test]
 fn the_whole_network_is_drawn_by_length() {
-    let road = RoadNetwork::from_config(&Config::default_lab().road);
+    let road = RoadNetwork::from_config(&Config::default_lab().road).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     let total = road.length_within(None);
     // Edge 2 -> 3 is 1.6 m of the network: its share of draws follows.
@@ -307,6 +307,7 @@ fn network(nodes: &[(u32, f64, f64)], edges: &[(u32, u32, f64)]) -> RoadNetwork 
             .collect(),
         start_node: 0,
     })
+    .unwrap()
 }
 
 #[test]
@@ -557,4 +558,46 @@ fn on_a_ring_every_road_carries_the_same_traffic() {
     // Outside every road: nothing.
     let far = road.traffic_within(Some((Enu2::new(1000.0, 1000.0), 10.0)));
     assert_eq!(far.length_m(), 0.0);
+}
+
+#[test]
+fn a_road_config_naming_a_missing_node_is_an_error_not_a_panic() {
+    let config = |to: u32, start_node: u32| RoadConfig {
+        nodes: vec![
+            NodeConfig {
+                id: 0,
+                x_m: 0.0,
+                y_m: 0.0,
+            },
+            NodeConfig {
+                id: 1,
+                x_m: 10.0,
+                y_m: 0.0,
+            },
+        ],
+        edges: vec![
+            EdgeConfig {
+                from: 0,
+                to,
+                p: 1.0,
+            },
+            EdgeConfig {
+                from: 1,
+                to: 0,
+                p: 1.0,
+            },
+        ],
+        start_node,
+    };
+    let e = RoadNetwork::try_from(&config(7, 0)).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "road.edges[0].to names node 7, which is not one of road.nodes"
+    );
+    let e = RoadNetwork::try_from(&config(1, 9)).unwrap_err();
+    assert!(
+        e.to_string().starts_with("road.start_node names node 9"),
+        "{e}"
+    );
+    assert_eq!(RoadNetwork::try_from(&config(1, 0)).unwrap().nodes.len(), 2);
 }
