@@ -682,3 +682,110 @@ fn stand_in_batch(out: &Path, duration_s: &str, extra: &[&str]) -> std::process:
         .output()
         .unwrap()
 }
+
+/// A recorded track (a car that stops at a light and turns where it likes) replaces the
+/// simulated car, in `sim` and in the closed loop; each run ends when the track does.
+#[test]
+fn a_recorded_track_is_the_target_and_its_end_ends_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rows = vec!["t_s,x_m,y_m".to_string()];
+    // East along y = 0 at 10 m/s, 10 s stopped at x = 300, then north from x = 600: 110 s.
+    let mut t = 0.0;
+    for x in (0..=300).step_by(10).chain(std::iter::once(300)) {
+        rows.push(format!("{t},{x},0"));
+        t += if rows.len() == 32 { 10.0 } else { 1.0 };
+    }
+    for x in (310..=600).step_by(10) {
+        rows.push(format!("{t},{x},0"));
+        t += 1.0;
+    }
+    for y in (10..=400).step_by(10) {
+        rows.push(format!("{t},600,{y}"));
+        t += 1.0;
+    }
+    std::fs::write(dir.path().join("car.csv"), rows.join("\n") + "\n").unwrap();
+    let outdoor = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml");
+    let text = std::fs::read_to_string(outdoor)
+        .unwrap()
+        .replace("[target]", "[target]\ntrajectory = \"car.csv\"");
+    let cfg = dir.path().join("outdoor-car.toml");
+    std::fs::write(&cfg, text).unwrap();
+    let cfg = cfg.to_str().unwrap();
+    let (o, _, out) = sim_to_files(
+        dir.path(),
+        &[
+            "--config",
+            cfg,
+            "--runs",
+            "2",
+            "--guidance",
+            "truth",
+            "--motion",
+            "cv",
+            "--duration",
+            "300",
+            "--quiet",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let steps = std::fs::read_to_string(out.join("truth_cv/run001.csv")).unwrap();
+    let last: Vec<f64> = steps
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .take(3)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (last[0] - 110.0).abs() < 0.5,
+        "the run ends with the track: {last:?}"
+    );
+    assert!(
+        (last[1] - 600.0).abs() < 1e-6 && (last[2] - 400.0).abs() < 1e-6,
+        "{last:?}"
+    );
+    let cl = dir.path().join("cl");
+    let o = infotrack()
+        .args([
+            "sim",
+            "--closed-loop",
+            "--config",
+            cfg,
+            "--motion",
+            "cv",
+            "--duration",
+            "300",
+            "--out",
+        ])
+        .arg(&cl)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("stopped by Duration"), "{stdout}");
+    let flight = std::fs::read_to_string(cl.join("flight.csv")).unwrap();
+    let (_, _, logged) = infotrack::daemon::flight_log::parse(&flight, "flight.csv").unwrap();
+    let flown = logged.last().unwrap().t_s;
+    assert!(
+        (100.0..=112.0).contains(&flown),
+        "the flight ends with the track: {flown} s"
+    );
+    // A track that leaves the workspace is refused at load, naming the file and the row.
+    std::fs::write(
+        dir.path().join("car.csv"),
+        "t_s,x_m,y_m\n0,0,0\n60,0,1500\n",
+    )
+    .unwrap();
+    let o = infotrack()
+        .args(["sim", "--config", cfg, "--runs", "1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("car.csv, line 3")
+            && err.contains("outside the workspace"),
+        "{err}"
+    );
+}

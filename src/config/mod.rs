@@ -356,6 +356,45 @@ pub struct TargetConfig {
     pub heading_gain_per_s: f64,
     /// Distance to the current goal node at which the next goal is sampled, metres.
     pub goal_switch_radius_m: f64,
+    /// Recorded tracks the target drives instead of the roads' Markov chain (the keys above
+    /// are then unused): a file or a list of files, Monte Carlo run i taking track i mod n.
+    /// CSV (`t_s,lon_deg,lat_deg`, or `t_s,x_m,y_m` in world ENU, with that header), GPX 1.1
+    /// tracks with times, or SUMO FCD output written with `--fcd-output.geo` (`.xml`);
+    /// interpolated in time. A run ends when its track does, if that is sooner. Absent: the
+    /// simulated car.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<TrajectoryFiles>,
+    /// In a SUMO FCD file with several vehicles, the one the target is; absent: the file's
+    /// only vehicle.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectory_vehicle: Option<String>,
+}
+
+/// `target.trajectory`: one track file or several.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum TrajectoryFiles {
+    /// One file.
+    One(PathBuf),
+    /// Several: run i takes file i mod n.
+    Many(Vec<PathBuf>),
+}
+
+impl TrajectoryFiles {
+    /// The files, in order.
+    pub fn files(&self) -> Vec<&PathBuf> {
+        match self {
+            Self::One(p) => vec![p],
+            Self::Many(v) => v.iter().collect(),
+        }
+    }
+
+    fn files_mut(&mut self) -> Vec<&mut PathBuf> {
+        match self {
+            Self::One(p) => vec![p],
+            Self::Many(v) => v.iter_mut().collect(),
+        }
+    }
 }
 
 /// The simulated agent: a multicopter at fixed altitude following position setpoints.
@@ -627,6 +666,15 @@ impl Config {
         let mut cfg = Self::from_toml_str(&text, path)?;
         let base = path.parent().unwrap_or(Path::new("."));
         cfg.resolve_paths(base, path);
+        // Tracks are read where the config's folder places them: checked here, after the
+        // paths are resolved.
+        let tracks = cfg.recorded_tracks()?;
+        if !tracks.is_empty() {
+            tracing::info!(
+                "the target drives {} recorded track(s) (target.trajectory); the simulated car's keys of [target] are unused",
+                tracks.len()
+            );
+        }
         Ok(cfg)
     }
 
@@ -665,6 +713,39 @@ impl Config {
         if let Some(l) = self.motion.onnxruntime_library.as_mut() {
             resolve("motion.onnxruntime_library", l);
         }
+        if let Some(t) = self.target.trajectory.as_mut() {
+            for f in t.files_mut() {
+                resolve("target.trajectory", f);
+            }
+        }
+    }
+
+    /// The recorded tracks of `target.trajectory`, read and checked (none: the simulated
+    /// car).
+    pub fn recorded_tracks(
+        &self,
+    ) -> Result<Vec<std::sync::Arc<crate::simulated::recorded::RecordedTrack>>, ConfigError> {
+        use crate::simulated::recorded::{load, TrackFrame};
+        let Some(t) = &self.target.trajectory else {
+            return Ok(Vec::new());
+        };
+        let frame = TrackFrame {
+            origin: self.world.as_ref().map(|w| &w.origin),
+            workspace: &self.workspace_enu,
+            vehicle: self.target.trajectory_vehicle.as_deref(),
+        };
+        t.files()
+            .into_iter()
+            .map(|f| {
+                load(f, &frame)
+                    .map(std::sync::Arc::new)
+                    .map_err(|e| ConfigError::Invalid {
+                        key: "target.trajectory".into(),
+                        value: f.display().to_string(),
+                        reason: e.to_string(),
+                    })
+            })
+            .collect()
     }
 
     /// Parses and validates TOML text; `origin` names the source in error messages.

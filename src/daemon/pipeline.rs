@@ -95,6 +95,8 @@ pub struct Shared {
     pub poses: Mutex<super::pose_history::PoseHistory>,
     /// Ask the pipeline to finish.
     pub stop: AtomicBool,
+    /// The simulated target's recorded track has ended: so does the flight.
+    pub target_ended: AtomicBool,
 }
 
 impl Shared {
@@ -107,6 +109,7 @@ impl Shared {
                 2,
             ))),
             stop: AtomicBool::new(false),
+            target_ended: AtomicBool::new(false),
         })
     }
 
@@ -378,6 +381,9 @@ pub enum PipelineError {
     /// The real camera: no calibration file.
     #[error("daemon.calibration is needed with a real camera")]
     NoCalibration,
+    /// `target.trajectory` could not be read.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
 }
 
 impl Pipeline {
@@ -409,7 +415,8 @@ impl Pipeline {
         } else {
             Some(FieldCamera::open(&cfg)?)
         };
-        let target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
+        // The daemon flies one run: the first recorded track, if any.
+        let target = TargetSim::for_run(&cfg, &world, 0, &mut rng_target)?;
         Ok(Self {
             sensor: DaemonSensor {
                 shared: shared.clone(),
@@ -455,6 +462,11 @@ impl Pipeline {
         if synthetic {
             self.target
                 .step(&self.world.road, self.physics_dt_s, &mut self.rng_target);
+            if self.target.ended() {
+                self.shared
+                    .target_ended
+                    .store(true, std::sync::atomic::Ordering::Relaxed);
+            }
         }
         let view = self.shared.supervisor_view();
         // Only ever set by `--inject pipeline-panic`, to prove the supervisor's hold.

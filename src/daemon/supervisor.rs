@@ -78,6 +78,10 @@ pub(super) async fn track(
         if began.elapsed().as_secs_f64() >= opts.duration_s {
             break StopReason::Duration;
         }
+        if shared.target_ended.load(Ordering::Relaxed) {
+            tracing::info!("the target's recorded track has ended: so does the flight");
+            break StopReason::Duration;
+        }
         if pipeline.thread.is_finished() || ticker.is_finished() {
             // The pipeline died (a panic): nothing decides any more; hold.
             tracing::error!("the pipeline thread stopped; holding the vehicle");

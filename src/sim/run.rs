@@ -28,6 +28,9 @@ pub enum RunError {
     /// No guidance law or no motion model was given.
     #[error("nothing to run: give at least one guidance law and one motion model")]
     NothingToRun,
+    /// `target.trajectory` could not be read.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
 }
 
 impl From<TickError<crate::vision::VisionError>> for RunError {
@@ -117,7 +120,7 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
     let method = method_salt(spec.guidance, &spec.estimator);
     let mut rng_target = stream_rng(spec.seed, spec.run_index, Stream::Target, 0);
     let rng_meas = stream_rng(spec.seed, spec.run_index, Stream::Measurement, 0);
-    let target = TargetSim::new(&world.road, cfg.target.clone(), &mut rng_target);
+    let target = TargetSim::for_run(cfg, world, spec.run_index, &mut rng_target)?;
     // The tracker's model of its camera is the sensor's: whole tags only through the
     // detector.
     let margin_m = if spec.vision {
@@ -188,6 +191,10 @@ impl SimRun {
         let mut snap_iter = spec.snapshot_times_s.iter().peekable();
         for tick in 1..=n_phys {
             let t_s = tick as f64 * dt_phys;
+            if self.target.ended() {
+                // A recorded track shorter than the run ends it.
+                break;
+            }
             self.target.step(&world.road, dt_phys, &mut self.rng_target);
             let (sp, ff) = setpoint.at(t_s, &world.workspace_enu);
             self.agent.step(&sp, &ff, dt_phys);

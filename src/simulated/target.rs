@@ -2,6 +2,7 @@
 
 use rand::Rng;
 
+use super::recorded::RecordedTrack;
 use crate::config::TargetConfig;
 use crate::world::geometry::{wrap_angle, Enu2};
 use crate::world::road::RoadNetwork;
@@ -18,6 +19,8 @@ pub struct TargetSim {
     /// Velocity over the last step, m/s.
     pub velocity_enu: Enu2,
     params: TargetConfig,
+    /// A recorded track driven instead of the roads' Markov chain, and the time along it.
+    recorded: Option<(std::sync::Arc<RecordedTrack>, f64)>,
 }
 
 impl TargetSim {
@@ -33,12 +36,66 @@ impl TargetSim {
             goal_node: goal,
             velocity_enu: Enu2::zeros(),
             params,
+            recorded: None,
         }
+    }
+
+    /// At the start of a recorded track, which it then drives (`params` unused).
+    pub fn recorded(track: std::sync::Arc<RecordedTrack>, params: TargetConfig) -> Self {
+        let (p, _) = track.at(0.0);
+        let ahead = track
+            .samples
+            .iter()
+            .map(|s| s.1 - p)
+            .find(|d| d.norm() > 1e-6);
+        Self {
+            position_enu: p,
+            heading_enu_rad: ahead.map_or(0.0, |d| d.y.atan2(d.x)),
+            goal_node: 0,
+            velocity_enu: Enu2::zeros(),
+            params,
+            recorded: Some((track, 0.0)),
+        }
+    }
+
+    /// The target of run `run_index`: recorded track `run_index mod n` of
+    /// `target.trajectory`, or the simulated car on the roads.
+    pub fn for_run<R: Rng + ?Sized>(
+        cfg: &crate::config::Config,
+        world: &crate::world::World,
+        run_index: u64,
+        rng: &mut R,
+    ) -> Result<Self, crate::config::ConfigError> {
+        let tracks = cfg.recorded_tracks()?;
+        Ok(match tracks.len() {
+            0 => Self::new(&world.road, cfg.target.clone(), rng),
+            n => Self::recorded(
+                tracks[(run_index % n as u64) as usize].clone(),
+                cfg.target.clone(),
+            ),
+        })
+    }
+
+    /// Whether a recorded track has ended (never, for the simulated car).
+    pub fn ended(&self) -> bool {
+        self.recorded
+            .as_ref()
+            .is_some_and(|(track, t_s)| *t_s >= track.duration_s())
     }
 
     /// Advances `dt_s`: switch goal near the current one, turn toward it (in place above the
     /// heading-error threshold), drive at cruise speed.
     pub fn step<R: Rng + ?Sized>(&mut self, road: &RoadNetwork, dt_s: f64, rng: &mut R) {
+        if let Some((track, t_s)) = self.recorded.as_mut() {
+            *t_s += dt_s;
+            let (p, v) = track.at(*t_s);
+            self.position_enu = p;
+            self.velocity_enu = v;
+            if v.norm() > 1e-6 {
+                self.heading_enu_rad = v.y.atan2(v.x);
+            }
+            return;
+        }
         let p = &self.params;
         let mut to_goal = road.nodes[self.goal_node].position_enu - self.position_enu;
         if to_goal.norm() < p.goal_switch_radius_m {
