@@ -66,3 +66,16 @@ if ! cmp -s "$SC_REQ" "$SC_DIR/installed-requirements.txt" 2>/dev/null; then
     --only-binary=:all: -r "$SC_REQ"
   cp "$SC_REQ" "$SC_DIR/installed-requirements.txt"
 fi
+
+# SciPy, which the paired statistics are checked against (tests/paired_stats_scipy.rs): a
+# virtual environment in .deps/stats, pinned in tests/stats/requirements.txt.
+ST_DIR=.deps/stats
+ST_REQ=tests/stats/requirements.txt
+if ! cmp -s "$ST_REQ" "$ST_DIR/installed-requirements.txt" 2>/dev/null; then
+  echo "setup: installing SciPy ($ST_REQ) into $ST_DIR" >&2
+  rm -rf "$ST_DIR"
+  python3 -m venv "$ST_DIR"
+  "$ST_DIR/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
+    --only-binary=:all: -r "$ST_REQ"
+  cp "$ST_REQ" "$ST_DIR/installed-requirements.txt"
+fi

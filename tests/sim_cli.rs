@@ -789,3 +789,55 @@ fn a_recorded_track_is_the_target_and_its_end_ends_the_run() {
         "{err}"
     );
 }
+
+/// Laws compared on the same seeds are compared in pairs: per metric the mean difference with
+/// its 95 % CI, d_z, the paired t and Wilcoxon tests, and Holm's correction, printed and in
+/// the JSON.
+#[test]
+fn laws_on_the_same_seeds_are_compared_in_pairs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, json, _) = sim_to_files(
+        dir.path(),
+        &[
+            "--runs",
+            "5",
+            "--duration",
+            "20",
+            "--guidance",
+            "eer,truth,lawn",
+            "--motion",
+            "cv",
+            "--quiet",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("paired eer - truth/cv (n 5, same seeds"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("paired eer - lawn/cv (n 5, same seeds"),
+        "{stdout}"
+    );
+    let v = read_json(&json);
+    let results = v["results"].as_array().unwrap();
+    let eer = results.iter().find(|r| r["guidance"] == "eer").unwrap();
+    assert!(eer.get("paired_vs_eer").is_none());
+    let mut holm = Vec::new();
+    for r in results.iter().filter(|r| r["guidance"] != "eer") {
+        let p = &r["paired_vs_eer"];
+        assert_eq!(p["n"], 5);
+        let metrics = p["metrics"].as_array().unwrap();
+        assert_eq!(metrics.len(), 4);
+        for m in metrics.iter().filter(|m| !m["wilcoxon"].is_null()) {
+            let (raw, adjusted) = (
+                num(m, &["wilcoxon", "p_value"]),
+                num(m, &["wilcoxon_p_holm"]),
+            );
+            assert!(adjusted >= raw && adjusted <= 1.0, "{m}");
+            holm.push(adjusted);
+        }
+    }
+    assert!(!holm.is_empty());
+}

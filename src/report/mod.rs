@@ -88,3 +88,43 @@ pub fn whole_file(
     }
     done
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_file_is_written_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let png = dir.path().join("scene.png");
+        // A write that fails half-way (a full disk): nothing is left, not even a 0-byte file.
+        let failed = whole_file(&png, |tmp| {
+            std::fs::write(tmp, b"half a picture").unwrap();
+            Err(ReportError::Io {
+                path: tmp.to_path_buf(),
+                source: std::io::Error::other("No space left on device"),
+            })
+        });
+        assert!(failed.is_err());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        // An earlier whole file stays as it was when its replacement fails.
+        write_file(&png, b"whole").unwrap();
+        let _ = whole_file(&png, |_| {
+            Err(ReportError::Io {
+                path: png.clone(),
+                source: std::io::Error::other("No space left on device"),
+            })
+        });
+        assert_eq!(std::fs::read(&png).unwrap(), b"whole");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_plot_on_a_full_disk_leaves_no_file() {
+        // A plot whose file cannot be created leaves nothing behind.
+        let steps = Vec::new();
+        let path = std::path::Path::new("/proc/no-such-folder/estimation_error.png");
+        assert!(plots::estimation_error(path, "t", &steps).is_err());
+        assert!(!path.exists());
+    }
+}

@@ -69,10 +69,38 @@ pub fn render(r: &MonteCarloResult) -> String {
     for c in &r.results {
         let _ = writeln!(s, "{}", search_line(c));
     }
+    for c in &r.results {
+        if let Some(p) = &c.paired_vs_eer {
+            let _ = writeln!(s, "{}", paired_line(c, p));
+        }
+    }
     for why in &r.refused {
         let _ = writeln!(s, "refused: {why}");
     }
     s
+}
+
+/// EER against one combination on the same seeds: per metric the mean difference (EER minus
+/// the law) with its 95 % CI, d_z, and the Wilcoxon p after Holm's correction.
+fn paired_line(c: &ComboResult, p: &crate::sim::PairedVsEer) -> String {
+    let parts: Vec<String> = p
+        .metrics
+        .iter()
+        .map(|m| match (&m.t_test, m.wilcoxon_p_holm) {
+            (Some(t), Some(holm)) => format!(
+                "{} {:+.3} [{:+.3}, {:+.3}] d_z {:+.2} p_holm {:.3}",
+                m.metric, t.mean_diff, t.ci95[0], t.ci95[1], t.cohen_dz, holm
+            ),
+            _ => format!("{} -", m.metric),
+        })
+        .collect();
+    format!(
+        "paired eer - {}/{} (n {}, same seeds; 95 % CI, Wilcoxon signed-rank, Holm over all): {}",
+        c.guidance,
+        c.motion,
+        p.n,
+        parts.join("; ")
+    )
 }
 
 /// One combination's search apart from its tracking, under the table.

@@ -6,5 +6,5 @@ pub mod dataset;
 pub mod monte_carlo;
 pub mod run;
 
-pub use monte_carlo::{MonteCarlo, MonteCarloResult};
+pub use monte_carlo::{MonteCarlo, MonteCarloResult, PairedMetric, PairedVsEer};
 pub use run::{check_combination, run_once, EstimatorKind, RunError, RunOutput, RunSpec};

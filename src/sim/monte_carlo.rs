@@ -67,6 +67,41 @@ pub struct VersusEer {
     pub fov_percent: Option<WelchResult>,
 }
 
+/// EER against this combination on the same seeds (run i of both chased the same target
+/// with the same noise): the paired tests per metric, EER minus this law.
+#[derive(Debug, Clone, Serialize)]
+pub struct PairedVsEer {
+    /// Pairs (runs of both).
+    pub n: usize,
+    /// Per metric, in the order of [`PAIRED_METRICS`].
+    pub metrics: Vec<PairedMetric>,
+}
+
+/// One metric's paired comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct PairedMetric {
+    /// The metric's name in the per-run summaries.
+    pub metric: &'static str,
+    /// Paired t-test of EER minus this law: mean difference, its 95 % CI, Cohen's d_z.
+    pub t_test: Option<crate::metrics::paired::PairedT>,
+    /// Wilcoxon signed-rank test of the same pairs.
+    pub wilcoxon: Option<crate::metrics::paired::Wilcoxon>,
+    /// The Wilcoxon p-value after Holm's correction over every law and metric compared with
+    /// EER in this campaign.
+    pub wilcoxon_p_holm: Option<f64>,
+}
+
+/// A per-run metric.
+pub type RunMetric = fn(&RunSummary) -> f64;
+
+/// The metrics compared in pairs.
+pub const PAIRED_METRICS: [(&str, RunMetric); 4] = [
+    ("tracking_error_m", |s| s.tracking_error_m),
+    ("estimation_error_m", |s| s.estimation_error_m),
+    ("cov_det", |s| s.cov_det),
+    ("fov_percent", |s| s.fov_percent),
+];
+
 /// Aggregates of one guidance x estimator combination.
 #[derive(Debug, Clone, Serialize)]
 pub struct ComboResult {
@@ -92,6 +127,10 @@ pub struct ComboResult {
     /// or when EER was not run.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub welch_vs_eer: Option<VersusEer>,
+    /// EER against this combination on the same seeds: paired tests with Holm's correction;
+    /// absent for EER itself or when EER was not run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub paired_vs_eer: Option<PairedVsEer>,
     /// Frame statistics (vision mode only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vision: Option<VisionSummary>,
@@ -180,6 +219,7 @@ impl MonteCarlo {
             .map(|((g, e), outs)| aggregate(*g, e, outs))
             .collect();
         add_welch_tests(&mut results);
+        add_paired_tests(&mut results);
         let mut outputs_map = BTreeMap::new();
         if self.keep_outputs {
             for ((g, e), outs) in combos.iter().zip(by_combo) {
@@ -223,6 +263,7 @@ fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput]) -> ComboRes
             median: median(&all_guid),
         },
         welch_vs_eer: None,
+        paired_vs_eer: None,
         vision: outs
             .iter()
             .filter_map(|o| o.vision)
@@ -255,6 +296,55 @@ fn progress_bar(shown: bool, jobs: usize) -> ProgressBar {
         b.set_style(style);
     }
     b
+}
+
+/// Paired tests of EER against every other law with the same estimator (run i of both used
+/// seed i's streams), the Wilcoxon p-values Holm-corrected over all of them.
+fn add_paired_tests(results: &mut [ComboResult]) {
+    use crate::metrics::paired::{holm, paired_t_test, wilcoxon_signed_rank};
+    let eer_runs: BTreeMap<String, Vec<RunSummary>> = results
+        .iter()
+        .filter(|r| r.guidance == "eer")
+        .map(|r| (r.motion.clone(), r.per_run.clone()))
+        .collect();
+    for r in results.iter_mut().filter(|r| r.guidance != "eer") {
+        let Some(eer) = eer_runs
+            .get(&r.motion)
+            .filter(|e| e.len() == r.per_run.len())
+        else {
+            continue;
+        };
+        let metrics = PAIRED_METRICS
+            .iter()
+            .map(|(metric, f)| {
+                let a: Vec<f64> = eer.iter().map(f).collect();
+                let b: Vec<f64> = r.per_run.iter().map(f).collect();
+                PairedMetric {
+                    metric,
+                    t_test: paired_t_test(&a, &b),
+                    wilcoxon: wilcoxon_signed_rank(&a, &b),
+                    wilcoxon_p_holm: None,
+                }
+            })
+            .collect();
+        r.paired_vs_eer = Some(PairedVsEer {
+            n: eer.len(),
+            metrics,
+        });
+    }
+    let family: Vec<&mut PairedMetric> = results
+        .iter_mut()
+        .filter_map(|r| r.paired_vs_eer.as_mut())
+        .flat_map(|p| p.metrics.iter_mut())
+        .filter(|m| m.wilcoxon.is_some())
+        .collect();
+    let p: Vec<f64> = family
+        .iter()
+        .filter_map(|m| m.wilcoxon.map(|w| w.p_value))
+        .collect();
+    for (m, adjusted) in family.into_iter().zip(holm(&p)) {
+        m.wilcoxon_p_holm = Some(adjusted);
+    }
 }
 
 /// Welch tests of EER against every other law with the same estimator.
