@@ -54,28 +54,20 @@ PY
   rm -rf "$tmp"
 fi
 
-# The stock MAVLink clients (MAVSDK, pymavlink, MAVProxy from PyPI) the tests fly the mock
-# with: a virtual environment in .deps/stock-clients, pinned in tests/stock_clients/requirements.txt.
-SC_DIR=.deps/stock-clients
-SC_REQ=tests/stock_clients/requirements.txt
-if ! cmp -s "$SC_REQ" "$SC_DIR/installed-requirements.txt" 2>/dev/null; then
-  echo "setup: installing the stock MAVLink clients ($SC_REQ) into $SC_DIR" >&2
-  rm -rf "$SC_DIR"
-  python3 -m venv "$SC_DIR"
-  "$SC_DIR/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
-    --only-binary=:all: -r "$SC_REQ"
-  cp "$SC_REQ" "$SC_DIR/installed-requirements.txt"
-fi
+# A virtual environment DIR with the pinned packages of REQ, made again when REQ changes.
+venv_from() { # venv_from DIR REQ WHAT
+  if ! cmp -s "$2" "$1/installed-requirements.txt" 2>/dev/null; then
+    echo "setup: installing $3 ($2) into $1" >&2
+    rm -rf "$1"
+    python3 -m venv "$1"
+    "$1/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
+      --only-binary=:all: -r "$2"
+    cp "$2" "$1/installed-requirements.txt"
+  fi
+}
 
-# SciPy, which the paired statistics are checked against (tests/paired_stats_scipy.rs): a
-# virtual environment in .deps/stats, pinned in tests/stats/requirements.txt.
-ST_DIR=.deps/stats
-ST_REQ=tests/stats/requirements.txt
-if ! cmp -s "$ST_REQ" "$ST_DIR/installed-requirements.txt" 2>/dev/null; then
-  echo "setup: installing SciPy ($ST_REQ) into $ST_DIR" >&2
-  rm -rf "$ST_DIR"
-  python3 -m venv "$ST_DIR"
-  "$ST_DIR/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
-    --only-binary=:all: -r "$ST_REQ"
-  cp "$ST_REQ" "$ST_DIR/installed-requirements.txt"
-fi
+# The stock MAVLink clients (MAVSDK, pymavlink, MAVProxy from PyPI) the tests fly the mock
+# with.
+venv_from .deps/stock-clients tests/stock_clients/requirements.txt "the stock MAVLink clients"
+# SciPy, which the paired statistics are checked against (tests/paired_stats_scipy.rs).
+venv_from .deps/stats tests/stats/requirements.txt "SciPy"

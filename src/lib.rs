@@ -29,6 +29,7 @@ pub mod guidance;
 pub mod metrics;
 pub mod mock;
 pub mod motion;
+pub mod recorded_track;
 pub mod report;
 pub mod rng;
 pub mod sim;

@@ -68,16 +68,8 @@ fn lab_with_file(file: &Path, key: &str, value: &str) -> PathBuf {
     let text = std::fs::read_to_string(file).unwrap();
     let mut table: toml::Table = text.parse().unwrap();
     let literal: toml::Table = format!("v = {value}").parse().unwrap();
-    let parts: Vec<&str> = key.split('.').collect();
-    let mut t = &mut table;
-    for p in &parts[..parts.len() - 1] {
-        t = t
-            .entry(p.to_string())
-            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-            .as_table_mut()
-            .unwrap();
-    }
-    t.insert(parts[parts.len() - 1].to_string(), literal["v"].clone());
+    let (t, last) = common::table_for(&mut table, key);
+    t.insert(last.to_string(), literal["v"].clone());
     let path = dir.join("bad.toml");
     std::fs::write(&path, toml::to_string(&table).unwrap()).unwrap();
     path

@@ -4,6 +4,8 @@
 //! refused with an error naming that key (or, for a workspace edge, what no longer fits in
 //! the workspace). Loading never panics.
 
+mod common;
+
 use std::path::Path;
 
 use infotrack::config::bounds::{MAX_EER_WORK, MAX_PARTICLES, MAX_SWEEP_POINTS};
@@ -54,16 +56,7 @@ fn any_number() -> impl Strategy<Value = f64> {
 /// takes integers, else as a float).
 fn lab_with(key: &str, value: f64) -> String {
     let mut table: toml::Table = DEFAULT_TOML.parse().unwrap();
-    let parts: Vec<&str> = key.split('.').collect();
-    let mut t = &mut table;
-    for p in &parts[..parts.len() - 1] {
-        t = t
-            .entry(p.to_string())
-            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-            .as_table_mut()
-            .unwrap();
-    }
-    let last = parts[parts.len() - 1];
+    let (t, last) = common::table_for(&mut table, key);
     let literal = match t.get(last) {
         Some(toml::Value::Integer(_)) if value.fract() == 0.0 && value.abs() < 9e18 => {
             toml::Value::Integer(value as i64)

@@ -8,7 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::relay::{frame, relay};
+use common::relay::{frame, relay, Relay};
 use common::{lab_config_with, output_text, udp_mock};
 use infotrack::autopilot::modes::{Flavor, Mode};
 use infotrack::mock::MockConfig;
@@ -87,14 +87,15 @@ fn poison(origin: (f64, f64)) -> Vec<Vec<u8>> {
 }
 
 /// Flies `infotrack run` on the lab config `cfg` through a relay that injects `inject`
-/// from `after` on; returns its output and the flight folder.
+/// from `after` on; returns its output, the flight folder and the relay (what the GCS
+/// heard).
 async fn fly_through(
     vehicle: u16,
     cfg: Option<&Path>,
     inject: Vec<Vec<u8>>,
     after: Duration,
     seconds: u32,
-) -> (std::process::Output, tempfile::TempDir) {
+) -> (std::process::Output, tempfile::TempDir, Relay) {
     let (relay, front) = relay(vehicle, inject, after).await;
     let dir = tempfile::tempdir().unwrap();
     let mut cmd = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"));
@@ -110,8 +111,7 @@ async fn fly_through(
         cmd.arg("--config").arg(c);
     }
     let out = cmd.output().await.unwrap();
-    drop(relay);
-    (out, dir)
+    (out, dir, relay)
 }
 
 /// Every position setpoint infotrack sent, as world ENU (east, north, up) when the vehicle's
@@ -155,7 +155,7 @@ async fn poisoned_telemetry_never_moves_a_setpoint_or_the_hold() {
     let m = MockConfig::new(Flavor::Px4);
     let origin = (m.origin_lat_deg, m.origin_lon_deg);
     let (mock, vehicle) = udp_mock(m).await;
-    let (out, dir) = fly_through(vehicle, None, poison(origin), Duration::ZERO, 12).await;
+    let (out, dir, _) = fly_through(vehicle, None, poison(origin), Duration::ZERO, 12).await;
     let all = output_text(&out);
     assert!(out.status.success(), "{all}");
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -215,7 +215,7 @@ async fn a_flood_of_spoofed_and_garbage_frames_keeps_the_fence() {
             _ => (0..40).map(|i| (i as u32 * 31 + k) as u8).collect(),
         });
     }
-    let (out, dir) = fly_through(vehicle, None, flood, Duration::ZERO, 10).await;
+    let (out, dir, _) = fly_through(vehicle, None, flood, Duration::ZERO, 10).await;
     let all = output_text(&out);
     assert!(out.status.success(), "{all}");
     assert!(
@@ -262,7 +262,7 @@ async fn a_spoofed_origin_at_start_never_moves_the_fence() {
     let cfgs = tempfile::tempdir().unwrap();
     let cfg = lab_on_earth(cfgs.path(), origin);
     let inject = vec![spoofed_origin(origin, 299.0)];
-    let (out, dir) = fly_through(vehicle, Some(&cfg), inject, Duration::ZERO, 8).await;
+    let (out, dir, _) = fly_through(vehicle, Some(&cfg), inject, Duration::ZERO, 8).await;
     let all = output_text(&out);
     assert!(!out.status.success(), "{all}");
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -295,24 +295,8 @@ async fn an_origin_that_moves_in_flight_holds_and_says_why() {
     let cfg = lab_on_earth(cfgs.path(), origin);
     let inject = vec![spoofed_origin(origin, 299.0)];
     // Takeoff to the start point takes ~6 s on the mock: the spoof comes during tracking.
-    let (relay, front) = relay(vehicle, inject, Duration::from_secs(12)).await;
-    let dir = tempfile::tempdir().unwrap();
-    let out = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
-        .args(["run", "--quiet", "--motion", "cv", "--duration", "40"])
-        .args([
-            "--allow-simulation-on-vehicle",
-            "--allow-auto-engage",
-            "--vehicle",
-        ])
-        .arg(format!("udpout:127.0.0.1:{front}"))
-        .arg("--config")
-        .arg(&cfg)
-        .arg("--out")
-        .arg(dir.path())
-        .current_dir(root())
-        .output()
-        .await
-        .unwrap();
+    let (out, dir, relay) =
+        fly_through(vehicle, Some(&cfg), inject, Duration::from_secs(12), 40).await;
     let all = output_text(&out);
     assert!(!out.status.success(), "{all}");
     assert!(
@@ -328,5 +312,38 @@ async fn an_origin_that_moves_in_flight_holds_and_says_why() {
     tokio::time::sleep(Duration::from_secs(2)).await;
     let (mode, pos) = mock.with(|m| (m.mode(), m.position_ned_m()));
     assert_eq!(mode, Mode::hold_for(Flavor::Px4), "{all}");
+    assert!((-pos[2] - 1.2).abs() < 0.5, "holds at {} m up", -pos[2]);
+}
+
+/// Heartbeats spoofed with the vehicle's own ids in another mode (STABILIZE), ten a second:
+/// whatever infotrack makes of the flapping mode, it never sends a setpoint outside the
+/// fence, and at the end the vehicle holds at its altitude.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn spoofed_heartbeats_in_another_mode_never_take_the_vehicle_out_of_the_fence() {
+    let (mock, vehicle) = udp_mock(MockConfig::new(Flavor::ArduPilot)).await;
+    let stabilize = frame(
+        1,
+        1,
+        &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                | MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        }),
+    );
+    let (out, dir, _) =
+        fly_through(vehicle, None, vec![stabilize], Duration::from_secs(8), 20).await;
+    let all = output_text(&out);
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("panicked"),
+        "{all}"
+    );
+    assert_inside_the_fence(dir.path(), 0.0, 50);
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let (mode, pos) = mock.with(|m| (m.mode(), m.position_ned_m()));
+    assert_eq!(mode, Mode::hold_for(Flavor::ArduPilot), "{all}");
     assert!((-pos[2] - 1.2).abs() < 0.5, "holds at {} m up", -pos[2]);
 }

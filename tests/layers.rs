@@ -30,12 +30,15 @@ fn allowed(layer: &str) -> Vec<&'static str> {
         // Reading a user's file without trusting it: a shell of its own, below the others.
         "bounded_file" => Vec::new(),
         "vision" => with(&["bounded_file"]),
+        // Recorded target tracks: files read into world ENU, for the config to check and the
+        // simulated target to drive.
+        "recorded_track" => with(&["bounded_file"]),
         // Validation checks vehicle URLs with the link's own parser.
-        "config" => with(&["vision", "autopilot", "bounded_file"]),
+        "config" => with(&["vision", "autopilot", "bounded_file", "recorded_track"]),
         // The vehicle link: never the mock, the simulator or the daemon.
         "autopilot" => with(&["bounded_file"]),
         "mock" => with(&["autopilot"]),
-        "simulated" => with(&["vision", "config"]),
+        "simulated" => with(&["vision", "config", "recorded_track"]),
         "report" => with(&["config", "sim", "simulated"]),
         "sim" => with(&["vision", "config", "simulated", "report"]),
         // The daemon uses the simulated sources, never the simulator's internals.

@@ -724,8 +724,8 @@ impl Config {
     /// car).
     pub fn recorded_tracks(
         &self,
-    ) -> Result<Vec<std::sync::Arc<crate::simulated::recorded::RecordedTrack>>, ConfigError> {
-        use crate::simulated::recorded::{load, TrackFrame};
+    ) -> Result<Vec<std::sync::Arc<crate::recorded_track::RecordedTrack>>, ConfigError> {
+        use crate::recorded_track::{load, TrackFrame};
         let Some(t) = &self.target.trajectory else {
             return Ok(Vec::new());
         };

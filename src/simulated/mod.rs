@@ -4,7 +4,6 @@
 //! frames rendered by the synthetic camera through the real detector).
 
 pub mod agent;
-pub mod recorded;
 pub mod rendered_camera;
 pub mod sensors;
 pub mod target;

@@ -2,8 +2,8 @@
 
 use rand::Rng;
 
-use super::recorded::RecordedTrack;
 use crate::config::TargetConfig;
+use crate::recorded_track::RecordedTrack;
 use crate::world::geometry::{wrap_angle, Enu2};
 use crate::world::road::RoadNetwork;
 

@@ -193,3 +193,18 @@ pub fn output_text(o: &std::process::Output) -> String {
         String::from_utf8_lossy(&o.stderr)
     )
 }
+
+/// The table under the dotted `key`'s last part (any depth, created where missing) and that
+/// part's name.
+pub fn table_for<'a>(table: &'a mut toml::Table, key: &'a str) -> (&'a mut toml::Table, &'a str) {
+    let (path, last) = key.rsplit_once('.').unwrap_or(("", key));
+    let mut t = table;
+    for p in path.split('.').filter(|p| !p.is_empty()) {
+        t = t
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+            .as_table_mut()
+            .unwrap();
+    }
+    (t, last)
+}
