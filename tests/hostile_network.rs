@@ -11,6 +11,7 @@ use std::time::Duration;
 use common::relay::{frame, relay, Relay};
 use common::{lab_config_with, output_text, udp_mock};
 use infotrack::autopilot::modes::{Flavor, Mode};
+use infotrack::mock::server::MockHandle;
 use infotrack::mock::MockConfig;
 use mavlink::dialects::ardupilotmega::*;
 
@@ -147,6 +148,34 @@ fn assert_inside_the_fence(dir: &Path, margin_m: f64, min: usize) {
     }
 }
 
+/// The vehicle holds (its flavour's hold mode) at the lab's 1.2 m: not the ground, not 10 km.
+fn assert_holds_at_the_lab_altitude(mock: &MockHandle, flavor: Flavor, all: &str) {
+    let (mode, pos) = mock.with(|m| (m.mode(), m.position_ned_m()));
+    assert_eq!(mode, Mode::hold_for(flavor), "{all}");
+    assert!((-pos[2] - 1.2).abs() < 0.5, "holds at {} m up", -pos[2]);
+}
+
+/// An ArduPilot heartbeat from (`sys`, 1) in `custom_mode`, armed or not.
+fn ardupilot_heartbeat(sys: u8, custom_mode: u32, armed: bool) -> Vec<u8> {
+    let armed = if armed {
+        MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+    } else {
+        MavModeFlag::empty()
+    };
+    frame(
+        sys,
+        1,
+        &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | armed,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        }),
+    )
+}
+
 /// Poisoned telemetry with the vehicle's ids through the whole flight and at the stop: it
 /// is dropped (and said so, at powers of two), never recorded, never flown toward; the
 /// PX4 hold keeps the altitude.
@@ -181,9 +210,7 @@ async fn poisoned_telemetry_never_moves_a_setpoint_or_the_hold() {
     }
     // The hold: PX4's AUTO.LOITER at the lab's 1.2 m, not the ground, not 10 km.
     tokio::time::sleep(Duration::from_secs(3)).await;
-    let (mode, pos) = mock.with(|m| (m.mode(), m.position_ned_m()));
-    assert_eq!(mode, Mode::hold_for(Flavor::Px4), "{all}");
-    assert!((-pos[2] - 1.2).abs() < 0.5, "holds at {} m up", -pos[2]);
+    assert_holds_at_the_lab_altitude(&mock, Flavor::Px4, &all);
 }
 
 /// A flood: 10,000 frames a second of other systems' traffic, spoofed heartbeats in other
@@ -191,25 +218,11 @@ async fn poisoned_telemetry_never_moves_a_setpoint_or_the_hold() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_flood_of_spoofed_and_garbage_frames_keeps_the_fence() {
     let (_mock, vehicle) = udp_mock(MockConfig::new(Flavor::ArduPilot)).await;
-    let heartbeat = |sys: u8, custom_mode: u32| {
-        frame(
-            sys,
-            1,
-            &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                custom_mode,
-                mavtype: MavType::MAV_TYPE_QUADROTOR,
-                autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-                base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                system_status: MavState::MAV_STATE_ACTIVE,
-                mavlink_version: 3,
-            }),
-        )
-    };
     // 1,000 frames every 100 ms.
     let mut flood = Vec::new();
     for k in 0..1_000u32 {
         flood.push(match k % 4 {
-            0 => heartbeat(42, k % 20),
+            0 => ardupilot_heartbeat(42, k % 20, false),
             1 => local(5_000.0, 5_000.0, -50.0, 0.0, k),
             2 => vec![0xfd, 9, 0, 0, k as u8, 1, 1, 0x21, 0, 0, 1, 2, 3],
             _ => (0..40).map(|i| (i as u32 * 31 + k) as u8).collect(),
@@ -310,9 +323,7 @@ async fn an_origin_that_moves_in_flight_holds_and_says_why() {
     );
     assert_inside_the_fence(dir.path(), 0.1, 50);
     tokio::time::sleep(Duration::from_secs(2)).await;
-    let (mode, pos) = mock.with(|m| (m.mode(), m.position_ned_m()));
-    assert_eq!(mode, Mode::hold_for(Flavor::Px4), "{all}");
-    assert!((-pos[2] - 1.2).abs() < 0.5, "holds at {} m up", -pos[2]);
+    assert_holds_at_the_lab_altitude(&mock, Flavor::Px4, &all);
 }
 
 /// Heartbeats spoofed with the vehicle's own ids in another mode (STABILIZE), ten a second:
@@ -321,19 +332,7 @@ async fn an_origin_that_moves_in_flight_holds_and_says_why() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn spoofed_heartbeats_in_another_mode_never_take_the_vehicle_out_of_the_fence() {
     let (mock, vehicle) = udp_mock(MockConfig::new(Flavor::ArduPilot)).await;
-    let stabilize = frame(
-        1,
-        1,
-        &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-                | MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
-            system_status: MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        }),
-    );
+    let stabilize = ardupilot_heartbeat(1, 0, true);
     let (out, dir, _) =
         fly_through(vehicle, None, vec![stabilize], Duration::from_secs(8), 20).await;
     let all = output_text(&out);
@@ -343,7 +342,5 @@ async fn spoofed_heartbeats_in_another_mode_never_take_the_vehicle_out_of_the_fe
     );
     assert_inside_the_fence(dir.path(), 0.0, 50);
     tokio::time::sleep(Duration::from_secs(2)).await;
-    let (mode, pos) = mock.with(|m| (m.mode(), m.position_ned_m()));
-    assert_eq!(mode, Mode::hold_for(Flavor::ArduPilot), "{all}");
-    assert!((-pos[2] - 1.2).abs() < 0.5, "holds at {} m up", -pos[2]);
+    assert_holds_at_the_lab_altitude(&mock, Flavor::ArduPilot, &all);
 }

@@ -298,15 +298,20 @@ fn progress_bar(shown: bool, jobs: usize) -> ProgressBar {
     b
 }
 
+/// EER's per-run summaries, by motion model: what every other law is compared with.
+fn eer_runs_by_motion(results: &[ComboResult]) -> BTreeMap<String, Vec<RunSummary>> {
+    results
+        .iter()
+        .filter(|r| r.guidance == "eer")
+        .map(|r| (r.motion.clone(), r.per_run.clone()))
+        .collect()
+}
+
 /// Paired tests of EER against every other law with the same estimator (run i of both used
 /// seed i's streams), the Wilcoxon p-values Holm-corrected over all of them.
 fn add_paired_tests(results: &mut [ComboResult]) {
     use crate::metrics::paired::{holm, paired_t_test, wilcoxon_signed_rank};
-    let eer_runs: BTreeMap<String, Vec<RunSummary>> = results
-        .iter()
-        .filter(|r| r.guidance == "eer")
-        .map(|r| (r.motion.clone(), r.per_run.clone()))
-        .collect();
+    let eer_runs = eer_runs_by_motion(results);
     for r in results.iter_mut().filter(|r| r.guidance != "eer") {
         let Some(eer) = eer_runs
             .get(&r.motion)
@@ -349,11 +354,7 @@ fn add_paired_tests(results: &mut [ComboResult]) {
 
 /// Welch tests of EER against every other law with the same estimator.
 fn add_welch_tests(results: &mut [ComboResult]) {
-    let eer_runs: BTreeMap<String, Vec<RunSummary>> = results
-        .iter()
-        .filter(|r| r.guidance == "eer")
-        .map(|r| (r.motion.clone(), r.per_run.clone()))
-        .collect();
+    let eer_runs = eer_runs_by_motion(results);
     for r in results.iter_mut().filter(|r| r.guidance != "eer") {
         if let Some(eer) = eer_runs.get(&r.motion) {
             let t = |f: fn(&RunSummary) -> f64| {
