@@ -1,12 +1,12 @@
 //! Criterion benches of the synthetic camera at field scale (1280 x 720 px, 70 degrees, 45 m,
 //! a 1.2 m tag and four occluders in view): the whole frame, as a frame without the tag in
 //! its search region costs, and a 160 px region of interest around the tag, as a frame
-//! found where the filter predicted costs (`vision::render::render_region`).
+//! found where the filter predicted costs (`render::render_region`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use infotrack::render::{render, render_region, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
 use infotrack::vision::image::PixelRect;
-use infotrack::vision::render::{render, render_region, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::tag_family::TagBitmap;
 use infotrack::world::geometry::{Enu2, PolygonEnu};
 

@@ -4,7 +4,7 @@
 Each key's description is its doc comment in the Rust source (which gives its unit and,
 where it has one, its range), its value in the lab scenario is what `infotrack config`
 prints for the embedded default (defaults filled in), and its upper bound, where
-`src/config/bounds.rs` sets one, is added. `--check` compares with the file instead of
+`crates/infotrack-config/src/bounds.rs` sets one, is added. `--check` compares with the file instead of
 writing it (tests/config_doc.rs runs that, so the reference cannot drift from the code).
 
 Usage: python3 scripts/config-doc.py [--check] [--bin target/release/infotrack]
@@ -19,13 +19,18 @@ import tomllib
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 # Where each config struct is defined.
 SOURCES = [
-    "src/config/mod.rs",
-    "src/world/road.rs",
-    "src/world/geometry.rs",
-    "src/vision/detector.rs",
-    "src/vision/projection.rs",
-    "src/guidance/lawn.rs",
-    "src/geodesy.rs",
+    "crates/infotrack-config/src/lib.rs",
+    "crates/infotrack-core/src/world/sections.rs",
+    "crates/infotrack-core/src/tracker/sections.rs",
+    "crates/infotrack-core/src/estimation/sections.rs",
+    "crates/infotrack-core/src/motion/sections.rs",
+    "crates/infotrack-core/src/guidance/sections.rs",
+    "crates/infotrack-core/src/world/road.rs",
+    "crates/infotrack-core/src/world/geometry.rs",
+    "crates/infotrack-vision/src/detector.rs",
+    "crates/infotrack-vision/src/projection.rs",
+    "crates/infotrack-core/src/guidance/lawn.rs",
+    "crates/infotrack-core/src/geodesy.rs",
 ]
 SECTION_DOC = {
     "": "Top level",
@@ -55,8 +60,8 @@ def structs():
 
 
 def bounds():
-    """{key: 'at most N'} from the checks in src/config/bounds.rs."""
-    text = (ROOT / "src/config/bounds.rs").read_text()
+    """{key: 'at most N'} from the checks in crates/infotrack-config/src/bounds.rs."""
+    text = (ROOT / "crates/infotrack-config/src/bounds.rs").read_text()
     consts = {
         m.group(1): float(m.group(2).replace("_", ""))
         for m in re.finditer(r"pub const (\w+): \w+ = ([0-9_.]+);", text)

@@ -1,39 +1,31 @@
 //! infotrack: find and follow a moving ground target that is often hidden.
 //!
-//! The crate is split into a pure, synchronous, seed-deterministic core and the
-//! programs built on it:
+//! The program is a workspace of crates, one per concern (ARCHITECTURE.md draws the
+//! graph); this crate is the flight daemon and the command line, and re-exports the
+//! others under the names the subcommands and tests use:
 //!
-//! * [`world`]: road network, occlusions, geofence, camera footprint, measurement model.
-//! * [`estimation`]: the particle filter and the constant-velocity Kalman filter.
-//! * [`motion`]: the motion models the particle filter predicts with.
-//! * [`guidance`]: entropy, expected entropy reduction (EER) and the baseline guidance laws.
-//! * [`sim`]: the target and agent simulators and one closed-loop simulated run.
-//! * [`metrics`]: per-step and per-run metrics and the statistics that compare methods.
-//! * [`report`]: tables, CSV logs, JSON and plots.
-//! * [`config`]: the TOML configuration, validated at load time.
-//! * [`autopilot`]: MAVLink frames, modes, parameter files and the vehicle link.
-//! * [`mock`]: a SITL-free mock autopilot (PX4 and ArduPilot flavours).
-//!
-//! All frames are named: `_enu` is the world frame (x east, y north, metres), the
-//! frame the paper's scenario is written in.
+//! * [`world`], [`motion`], [`estimation`], [`guidance`], [`tracker`], [`metrics`],
+//!   [`frames`], [`geodesy`], [`rng`]: the pure core (`infotrack-core`).
+//! * [`dmmn`]: the learned motion model on ONNX Runtime (`infotrack-dmmn`).
+//! * [`vision`]: camera model, AprilTag detector, capture (`infotrack-vision`).
+//! * [`autopilot`]: the MAVLink vehicle link (`infotrack-link`).
+//! * [`mock`]: the mock autopilot (`infotrack-mock`).
+//! * [`config`], [`recorded_track`]: the configuration (`infotrack-config`).
+//! * [`sim`], [`simulated`], [`render`], [`report`]: the simulator (`infotrack-sim`).
+//! * [`bounded_file`]: bounded reads of user files (`infotrack-files`).
 #![deny(missing_docs)]
 
-pub mod autopilot;
-pub mod bounded_file;
-pub mod config;
 pub mod daemon;
-pub mod estimation;
-pub mod frames;
-pub mod geodesy;
-pub mod guidance;
-pub mod metrics;
-pub mod mock;
-pub mod motion;
-pub mod recorded_track;
-pub mod report;
-pub mod rng;
-pub mod sim;
-pub mod simulated;
-pub mod tracker;
-pub mod vision;
-pub mod world;
+pub mod wiring;
+
+pub use infotrack_config as config;
+pub use infotrack_config::recorded_track;
+pub use infotrack_core::{
+    estimation, frames, geodesy, guidance, metrics, motion, rng, tracker, world,
+};
+pub use infotrack_dmmn as dmmn;
+pub use infotrack_files as bounded_file;
+pub use infotrack_link as autopilot;
+pub use infotrack_mock as mock;
+pub use infotrack_sim::{render, report, sim, simulated};
+pub use infotrack_vision as vision;

@@ -34,6 +34,7 @@ fn opts(duration_s: f64, tlog: Option<std::path::PathBuf>) -> RunOptions {
             simulation: true,
             auto_engage: true,
         },
+        simulators: infotrack::wiring::simulators(),
     }
 }
 
@@ -414,7 +415,11 @@ fn packet_loss_link_cut_and_camera_freeze_inside_the_loop_are_survived() {
         "tracking did not resume"
     );
     assert_eq!(r.final_mode, Some(Mode::hold_for(r.flavor)));
-    assert_eq!(r.mock.as_ref().unwrap().with(|m| m.mode()), Mode::Hold);
+    let mock = r.mock.as_ref().unwrap().as_any();
+    let mock = mock
+        .downcast_ref::<infotrack::mock::server::MockHandle>()
+        .unwrap();
+    assert_eq!(mock.with(|m| m.mode()), Mode::Hold);
     // The log names the faults in force, the vehicle's mode and the entropy at each step.
     assert!(during(5.5, 9.5).all(|x| x.faults == "loss=30"));
     assert!(during(22.5, 25.5).all(|x| x.faults == "camera-freeze"));
@@ -679,8 +684,8 @@ fn bad_starts_give_clear_errors() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_real_camera_source_is_projected_with_the_pose_at_capture_time() {
     use infotrack::daemon::pipeline::TrackState;
+    use infotrack::render::{render, RenderOptions, SceneEnu, TargetAppearance};
     use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
-    use infotrack::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
     use infotrack::vision::{cv_io, tag_family::TagBitmap};
     use opencv::prelude::*;
     // A camera that films a tag at (0.1, 0.15) m ENU from where the vehicle will hover:
@@ -892,4 +897,35 @@ async fn arming_waits_for_a_vehicle_that_becomes_ready() {
         "{:?}",
         r.unexpected_mode_changes
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_daemon_without_the_simulators_refuses_the_mock_and_the_synthetic_camera() {
+    // The daemon reaches the mock and the simulator only through what the program hands
+    // it: without them a `mock:` vehicle or the synthetic camera is an error, not a flight.
+    let bare = RunOptions {
+        simulators: daemon::Simulators::default(),
+        ..opts(5.0, None)
+    };
+    let err = daemon::run(&lab(), &bare)
+        .await
+        .err()
+        .expect("no mock")
+        .to_string();
+    assert!(err.contains("does not provide"), "{err}");
+    // A real vehicle (a mock process over UDP) with the synthetic camera: the pipeline,
+    // built first, says what is missing before anything is sent.
+    let (mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
+    let mut cfg = lab();
+    cfg.daemon.vehicle = format!("udpout:127.0.0.1:{port}");
+    let err = daemon::run(&cfg, &bare)
+        .await
+        .err()
+        .expect("no synthetic camera")
+        .to_string();
+    assert!(
+        err.contains("synthetic") && err.contains("does not provide"),
+        "{err}"
+    );
+    assert_eq!(mock.with(|m| m.setpoints_received()), 0);
 }

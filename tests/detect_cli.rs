@@ -2,9 +2,9 @@
 
 use std::process::Command;
 
+use infotrack::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
 use infotrack::vision::cv_io;
-use infotrack::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::tag_family::TagBitmap;
 
 fn infotrack() -> Command {

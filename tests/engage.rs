@@ -55,7 +55,7 @@ fn run_until_stopped(cfg: &Path, port: u16, out: Option<&Path>) -> tokio::proces
 /// The pilot flips the switch to `mode`, retrying for up to 5 s (PX4 refuses OFFBOARD
 /// until infotrack's stream is fresh).
 async fn switch(mock: &MockHandle, mode: Mode) {
-    let mut last = Err(String::new());
+    let mut last = Err(infotrack::mock::autopilot::PilotRefused(String::new()));
     for _ in 0..100 {
         last = mock.with(|m| m.pilot_switch(mode));
         if last.is_ok() {

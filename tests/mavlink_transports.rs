@@ -440,3 +440,39 @@ async fn a_cut_link_and_a_reboot_are_detected_and_reported() {
         (5.0, ParamType::Int32)
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_telemetry_log_reads_back_as_a_connection() {
+    // The link records every message it sends and receives in its tlog; opened as a
+    // `file:` connection (as rust-mavlink opens one), the same messages come back in order.
+    let (_mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("link.tlog");
+    let mut cfg = link_cfg(&format!("udpout:127.0.0.1:{port}"), 1);
+    cfg.tlog = Some(path.clone());
+    let link = connect(cfg, Flavor::Px4).await;
+    link.request_telemetry().await.unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    link.flush_tlog();
+    drop(link);
+    // Read both ways from one copy: the link's tasks may still be winding down.
+    let copy = dir.path().join("copy.tlog");
+    std::fs::copy(&path, &copy).unwrap();
+    let path = copy;
+    let recorded = infotrack::autopilot::tlog::read(&path).unwrap();
+    assert!(recorded.len() > 20, "{} messages", recorded.len());
+    let file = format!("file:{}", path.display());
+    infotrack::autopilot::link::check_url(&file).unwrap();
+    let conn = infotrack::autopilot::connection::Connection::open(&file, None)
+        .await
+        .unwrap();
+    let mut read_back = Vec::new();
+    while let Ok(Ok((header, msg))) =
+        tokio::time::timeout(Duration::from_secs(2), conn.recv()).await
+    {
+        read_back.push((header, msg));
+    }
+    let recorded: Vec<_> = recorded.into_iter().map(|(_, h, m)| (h, m)).collect();
+    assert_eq!(read_back.len(), recorded.len());
+    assert!(read_back == recorded, "the messages differ");
+}

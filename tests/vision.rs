@@ -2,6 +2,7 @@
 //! truth, projection accuracy, no false detections, occlusion, the region-of-interest
 //! search, bad inputs, and a video written with OpenCV read back as a camera.
 
+use infotrack::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
 use infotrack::vision::capture::{Camera, CaptureConfig};
 use infotrack::vision::cv_io;
@@ -11,7 +12,6 @@ use infotrack::vision::detector::{
 };
 use infotrack::vision::image::GrayImage;
 use infotrack::vision::projection::{measure_tag, ProjectionNoise};
-use infotrack::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::tag_family::TagBitmap;
 use infotrack::vision::VisionError;
 use infotrack::world::geometry::{Enu2, PolygonEnu};

@@ -12,10 +12,10 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
 use infotrack::config::VisionSimConfig;
+use infotrack::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
 use infotrack::vision::detector::{AprilTagDetector, RoiSearch};
 use infotrack::vision::projection::measure_tag;
-use infotrack::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::tag_family::TagBitmap;
 use infotrack::vision::VisionError;
 

@@ -7,8 +7,8 @@ use std::time::Instant;
 use serde::Serialize;
 
 use infotrack::config::Config;
+use infotrack::dmmn::Dmmn;
 use infotrack::metrics::median;
-use infotrack::motion::dmmn::Dmmn;
 
 #[path = "../../benches/fixtures/mod.rs"]
 mod fixtures;
@@ -122,10 +122,10 @@ pub fn run_dmmn(
     model_path: &std::path::Path,
     repetitions: usize,
     seed: u64,
-) -> Result<DmmnTimes, String> {
+) -> Result<DmmnTimes, infotrack::motion::MotionError> {
     let mut cfg = Config::default_lab();
     cfg.motion.dmmn_model = model_path.to_path_buf();
-    let load = || Dmmn::load(model_path, &cfg.motion_params()).map_err(|e| e.to_string());
+    let load = || Dmmn::load(model_path, &cfg.motion_params());
     let mut m = load()?;
     let parameters = m.metadata().parameters;
     let reps = repetitions.min(200);
@@ -202,10 +202,10 @@ pub fn run(repetitions: usize, seed: u64, model: &std::path::Path) -> BenchRepor
 }
 
 impl BenchReport {
-    fn with_dmmn(mut self, r: Result<DmmnTimes, String>) -> Self {
+    fn with_dmmn(mut self, r: Result<DmmnTimes, infotrack::motion::MotionError>) -> Self {
         match r {
             Ok(t) => self.dmmn = Some(t),
-            Err(e) => self.dmmn_skipped = Some(e),
+            Err(e) => self.dmmn_skipped = Some(e.to_string()),
         }
         self
     }

@@ -8,12 +8,12 @@ use std::time::Instant;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
+use infotrack::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
 use infotrack::vision::detector::{
     AprilTagDetector, DetectorConfig, RoiPx, RoiSearch, SearchOutcome,
 };
 use infotrack::vision::image::GrayImage;
-use infotrack::vision::render::{render, RenderOptions, SceneEnu, TargetAppearance};
 use infotrack::vision::tag_family::TagBitmap;
 use infotrack::vision::VisionError;
 

@@ -3,8 +3,36 @@
 
 pub mod altitude_bench;
 pub mod bench;
+pub mod bench_cmd;
 pub mod calibrate;
+pub mod dataset_cmd;
 pub mod detect;
 pub mod detect_bench;
+pub mod mock_cmd;
 pub mod numbers;
+pub mod params_cmd;
 pub mod run_cmd;
+pub mod sim_cmd;
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+
+use infotrack::config::Config;
+
+/// The configuration at `path`, or the embedded default (the lab).
+pub fn load_config(path: Option<&Path>) -> Result<Config> {
+    Ok(match path {
+        Some(p) => Config::load(p)?,
+        None => Config::default_lab(),
+    })
+}
+
+/// The tokio runtime the link and the mock run on.
+pub fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}

@@ -193,6 +193,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
             simulation: a.allow_simulation_on_vehicle,
             auto_engage: a.allow_auto_engage,
         },
+        simulators: infotrack::wiring::simulators(),
     };
     fly(&cfg, &opts, out.as_deref(), Clock::Wall(rt))
 }
@@ -231,60 +232,7 @@ pub fn fly(
         peak_rss_mb()
     );
     if let Some(dir) = out {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let steps: Vec<_> = report
-            .output
-            .records
-            .iter()
-            .map(|r| r.step.clone())
-            .collect();
-        // steps.csv and flight.csv were written as the flight went (daemon::recorder).
-        if let Some(why) = &report.output.records_failure {
-            eprintln!(
-                "warning: the flight's records in {} stopped early: {why}",
-                dir.display()
-            );
-        }
-        // The flight is over and the vehicle holds: a write failing here (a full disk) is
-        // said, and the files that made it stay.
-        let world = cfg.world();
-        let written = [
-            report::plots::scene(
-                &dir.join("scene.png"),
-                &format!("{} | closed loop, {} guidance", cfg.name, "eer"),
-                &world,
-                &steps,
-                &[],
-            ),
-            report::plots::estimation_error(
-                &dir.join("estimation_error.png"),
-                "closed loop: estimation error",
-                &steps,
-            ),
-            final_summary(dir, &report),
-        ];
-        let failed: Vec<_> = written.into_iter().filter_map(Result::err).collect();
-        for e in &failed {
-            eprintln!("error: after the flight: {e:#}");
-        }
-        if let Some(why) = &report.output.records_failure {
-            bail!(
-                "the flight's records in {} stopped early ({why}); the vehicle was held as usual, \
-                 and summary.json says the records are partial",
-                dir.display()
-            );
-        }
-        if !failed.is_empty() {
-            bail!(
-                "{} of the flight's files could not be written in {} (see above)",
-                failed.len(),
-                dir.display()
-            );
-        }
-        println!(
-            "wrote steps.csv, flight.csv, link.tlog, scene.png, estimation_error.png and summary.json to {}",
-            dir.display()
-        );
+        write_flight_folder(dir, cfg, &report)?;
     }
     if report.stopped_by == daemon::StopReason::OriginChanged {
         bail!(
@@ -292,6 +240,66 @@ pub fn fly(
              and its geofence: tracking stopped and the vehicle was put in hold"
         );
     }
+    Ok(())
+}
+
+/// The flight's plots and summary into `dir` (its records were written as it flew); an
+/// error names what could not be written.
+fn write_flight_folder(dir: &std::path::Path, cfg: &Config, report: &DaemonReport) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let steps: Vec<_> = report
+        .output
+        .records
+        .iter()
+        .map(|r| r.step.clone())
+        .collect();
+    // steps.csv and flight.csv were written as the flight went (daemon::recorder).
+    if let Some(why) = &report.output.records_failure {
+        eprintln!(
+            "warning: the flight's records in {} stopped early: {why}",
+            dir.display()
+        );
+    }
+    // The flight is over and the vehicle holds: a write failing here (a full disk) is
+    // said, and the files that made it stay.
+    let world = cfg.world();
+    let written = [
+        report::plots::scene(
+            &dir.join("scene.png"),
+            &format!("{} | closed loop, {} guidance", cfg.name, "eer"),
+            &world,
+            &steps,
+            &[],
+        ),
+        report::plots::estimation_error(
+            &dir.join("estimation_error.png"),
+            "closed loop: estimation error",
+            &steps,
+        ),
+        final_summary(dir, report),
+    ];
+    let failed: Vec<_> = written.into_iter().filter_map(Result::err).collect();
+    for e in &failed {
+        eprintln!("error: after the flight: {e:#}");
+    }
+    if let Some(why) = &report.output.records_failure {
+        bail!(
+            "the flight's records in {} stopped early ({why}); the vehicle was held as usual, \
+             and summary.json says the records are partial",
+            dir.display()
+        );
+    }
+    if !failed.is_empty() {
+        bail!(
+            "{} of the flight's files could not be written in {} (see above)",
+            failed.len(),
+            dir.display()
+        );
+    }
+    println!(
+        "wrote steps.csv, flight.csv, link.tlog, scene.png, estimation_error.png and summary.json to {}",
+        dir.display()
+    );
     Ok(())
 }
 

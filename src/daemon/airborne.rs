@@ -11,16 +11,17 @@ pub(super) async fn connect(
     signal: &mut ShutdownSignal,
 ) -> Result<Vehicle, DaemonError> {
     let d = &cfg.daemon;
-    let (mock, url) = match d.vehicle.as_str() {
-        "mock:px4" => {
-            let (m, u) = start_mock(cfg, Flavor::Px4).await?;
+    let (mock, url) = match in_process_flavor(&d.vehicle) {
+        Some(flavor) => {
+            let start = opts
+                .simulators
+                .start_vehicle
+                .as_ref()
+                .ok_or(DaemonError::NoSimulator("the in-process mock autopilot"))?;
+            let (m, u) = start(cfg, flavor).await.map_err(DaemonError::MockStart)?;
             (Some(m), u)
         }
-        "mock:ardupilot" => {
-            let (m, u) = start_mock(cfg, Flavor::ArduPilot).await?;
-            (Some(m), u)
-        }
-        url => (None, url.to_string()),
+        None => (None, d.vehicle.clone()),
     };
     if mock.is_none()
         && opts
@@ -55,6 +56,15 @@ pub(super) async fn connect(
         url,
         mock,
     })
+}
+
+/// The flavour of an in-process mock vehicle name (`mock:px4`, `mock:ardupilot`).
+fn in_process_flavor(vehicle: &str) -> Option<Flavor> {
+    match vehicle {
+        "mock:px4" => Some(Flavor::Px4),
+        "mock:ardupilot" => Some(Flavor::ArduPilot),
+        _ => None,
+    }
 }
 
 /// What the vehicle can fly, from the agent's planned speed and the geofence's farthest

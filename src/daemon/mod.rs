@@ -20,6 +20,7 @@
 
 mod airborne;
 pub mod engagement;
+mod field_camera;
 pub mod flight_log;
 pub mod gcs_report;
 pub mod heading;
@@ -29,6 +30,8 @@ pub mod pipeline;
 pub mod pose_history;
 pub mod recorder;
 pub mod replay;
+mod sensor;
+pub mod simulators;
 mod supervisor;
 mod vehicle_speed;
 
@@ -36,6 +39,7 @@ use airborne::{check_world_origin, connect, launch};
 pub use options::{
     BadFault, DaemonReport, FaultKind, RunOptions, ScheduledFault, StopReason, VehiclePermits,
 };
+pub use simulators::{InProcessVehicle, Simulators, SyntheticWorld};
 use supervisor::{stop, track};
 
 use std::path::PathBuf;
@@ -53,8 +57,6 @@ use crate::config::{Config, Engage};
 use crate::frames::Enu2;
 use crate::frames::PositionEnu;
 use crate::metrics::RunSummary;
-use crate::mock::server::{spawn, Faults, MockHandle};
-use crate::mock::MockConfig;
 use crate::vision::camera_model::VehiclePoseNed;
 use pipeline::{Command, PipelineOutput, Ready, Shared, VehicleSnapshot};
 use recorder::FlightRecorder;
@@ -82,7 +84,10 @@ pub enum DaemonError {
     PipelineDied(&'static str),
     /// The in-process mock autopilot could not be started.
     #[error("cannot start the mock autopilot: {0}")]
-    MockStart(std::io::Error),
+    MockStart(simulators::SimulatorError),
+    /// A simulated part was asked for that the program does not provide.
+    #[error("this program does not provide {0}; use a real vehicle and camera")]
+    NoSimulator(&'static str),
     /// `daemon.signing_key` could not be used.
     #[error("daemon.signing_key: {0}")]
     SigningKey(#[from] crate::autopilot::signing::SigningKeyError),
@@ -174,45 +179,7 @@ struct Vehicle {
     /// `daemon.vehicle` as configured.
     name: String,
     url: String,
-    mock: Option<MockHandle>,
-}
-
-fn free_udp_port() -> Result<u16, DaemonError> {
-    std::net::UdpSocket::bind("127.0.0.1:0")
-        .and_then(|s| s.local_addr())
-        .map(|a| a.port())
-        .map_err(DaemonError::MockStart)
-}
-
-/// Starts the in-process mock for `mock:px4` / `mock:ardupilot`, with the agent's speed and
-/// acceleration limits as its parameters and ArduPilot's lean limit as the shipped
-/// parameter file sets it: a vehicle set up as the README says (a real one needs the same
-/// parameters loaded before take-off); returns it and the URL to reach it.
-async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<(MockHandle, String), DaemonError> {
-    let port = free_udp_port()?;
-    let mut mc = MockConfig::new(flavor);
-    mc.seed = cfg.seed;
-    if cfg.daemon.mock_response == crate::config::MockResponse::Sitl {
-        mc.answer_as_sitl();
-    }
-    let a = &cfg.agent;
-    mc.param_overrides = match flavor {
-        Flavor::Px4 => vec![
-            ("MPC_XY_VEL_MAX".into(), a.speed_limit_mps),
-            ("MPC_ACC_HOR".into(), a.accel_limit_mps2),
-        ],
-        // ArduPilot's are in cm/s and cm/s^2.
-        Flavor::ArduPilot => vec![
-            ("WPNAV_SPEED".into(), a.speed_limit_mps * 100.0),
-            ("WPNAV_ACCEL".into(), a.accel_limit_mps2 * 100.0),
-            // firmware-params/ardupilot-guided-tracking.parm: 45 degrees, in centidegrees.
-            ("ANGLE_MAX".into(), 4500.0),
-        ],
-    };
-    let mock = spawn(&format!("udpin:127.0.0.1:{port}"), mc, Faults::default())
-        .await
-        .map_err(DaemonError::MockStart)?;
-    Ok((mock, format!("udpout:127.0.0.1:{port}")))
+    mock: Option<Box<dyn InProcessVehicle>>,
 }
 
 /// Resolves when SIGINT or SIGTERM arrives. The handlers are installed by this call, not at
@@ -369,6 +336,7 @@ async fn start_pipeline(
             motion_name: opts.motion.clone(),
             seed: opts.seed,
             recorder,
+            synthetic: opts.simulators.synthetic_world.clone(),
         };
         let shared = shared.clone();
         std::thread::Builder::new()

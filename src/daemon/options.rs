@@ -22,6 +22,9 @@ pub struct RunOptions {
     pub faults: Vec<ScheduledFault>,
     /// What the operator explicitly allowed on a vehicle that is not the in-process mock.
     pub permits: VehiclePermits,
+    /// The simulated parts the program provides (the in-process mock, the synthetic
+    /// camera's world).
+    pub simulators: Simulators,
 }
 
 /// What the operator must say explicitly before infotrack flies a vehicle that is not the
@@ -147,6 +150,6 @@ pub struct DaemonReport {
     pub flavor: Flavor,
     /// Where it was reached (`mock:px4 via udpout:...` or the URL).
     pub vehicle: String,
-    /// The in-process mock, when the vehicle was one (for tests and fault injection).
-    pub mock: Option<MockHandle>,
+    /// The in-process vehicle, when the vehicle was one (for tests).
+    pub mock: Option<Box<dyn InProcessVehicle>>,
 }

@@ -6,25 +6,23 @@
 //! through [`Shared`] and the tick channels.
 
 use std::sync::atomic::AtomicBool;
-use std::sync::{mpsc, Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::sync::{mpsc, Arc};
 
+use parking_lot::Mutex;
+use std::time::Duration;
+
+use super::field_camera::FieldCamera;
 pub use super::flight_log::FlightRecord;
 use super::heading;
+use super::sensor::{DaemonSensor, Frames};
 use crate::config::Config;
 use crate::guidance::GuidanceKind;
 use crate::rng::{stream_rng, Stream};
-use crate::simulated::{RenderedSensor, TargetSim, VisionSensor, VisionStats};
 pub use crate::tracker::{Command, TrackState};
-use crate::tracker::{
-    Decision, EstimatorKind, MonotonicClock, Observation, Prior, Sensor, StepOutcome, TickInput,
-    Tracker,
-};
-use crate::vision::camera_model::{CameraModel, CameraMount, VehiclePoseNed};
-use crate::vision::capture::{Camera, CaptureConfig};
-use crate::vision::detector::{AprilTagDetector, RoiPx, RoiSearch};
-use crate::vision::projection::{measure_tag, ProjectionNoise};
-use crate::world::camera::{View, NORTH_VIEW_YAW_ENU_RAD};
+use crate::tracker::{Decision, EstimatorKind, MonotonicClock, StepOutcome, TickInput, Tracker};
+use crate::vision::camera_model::VehiclePoseNed;
+use crate::vision::VisionStats;
+use crate::world::camera::NORTH_VIEW_YAW_ENU_RAD;
 use crate::world::geometry::Enu2;
 use crate::world::World;
 
@@ -115,12 +113,12 @@ impl Shared {
 
     /// What the supervisor said last.
     pub fn supervisor_view(&self) -> SupervisorView {
-        self.to_pipeline.lock().expect("shared poisoned").clone()
+        self.to_pipeline.lock().clone()
     }
 
     /// What the pipeline said last.
     pub fn pipeline_view(&self) -> PipelineView {
-        *self.from_pipeline.lock().expect("shared poisoned")
+        *self.from_pipeline.lock()
     }
 }
 
@@ -159,202 +157,14 @@ pub enum Ready {
     Err(PipelineError),
 }
 
-/// A real camera: frames from capture, projected with the pose at their capture time.
-struct FieldCamera {
-    camera: Camera,
-    model: CameraModel,
-    search: RoiSearch<AprilTagDetector>,
-    noise: ProjectionNoise,
-    tag_ids: Vec<u32>,
-    tag_size_m: f64,
-}
-
-impl FieldCamera {
-    fn open(cfg: &Config) -> Result<Self, PipelineError> {
-        let d = &cfg.daemon;
-        let calib = d
-            .calibration
-            .as_deref()
-            .ok_or(PipelineError::NoCalibration)?;
-        let intrinsics = crate::vision::cv_io::load_calibration(calib)?;
-        let [r, p, y] = d.camera_mount_rpy_rad;
-        let camera = Camera::open(CaptureConfig {
-            source: d.camera.clone(),
-            width_px: intrinsics.width_px,
-            height_px: intrinsics.height_px,
-            fps: d.camera_fps,
-            timeout_s: d.camera_timeout_s,
-        })?;
-        Ok(Self {
-            camera,
-            model: CameraModel {
-                intrinsics,
-                mount: CameraMount::from_angles(r, p, y, d.camera_offset_body_frd_m),
-            },
-            search: RoiSearch::new(AprilTagDetector::new(cfg.vision.detector.clone())?)
-                .with_max_full_frame_decimation(cfg.vision.detector.max_full_frame_decimation),
-            noise: cfg.vision.projection.clone(),
-            tag_ids: vec![cfg.vision.tag_id],
-            tag_size_m: cfg.vision.tag_size_m,
-        })
-    }
-
-    /// The newest frame, if one came: its pose (at capture time) and the measurement.
-    fn look(
-        &mut self,
-        shared: &Shared,
-        prior: &Prior,
-        stats: &mut VisionStats,
-    ) -> Option<(VehiclePoseNed, Option<Enu2>)> {
-        let frame = self.camera.latest()?;
-        stats.frames += 1;
-        let pose = shared.poses.lock().expect("shared poisoned").at(
-            // Capture stamps come from the capture thread on the wall clock, which is the
-            // runtime's clock whenever a real camera flies.
-            tokio::time::Instant::from_std(frame.captured_at),
-            Duration::from_millis(100),
-        );
-        let Some(pose) = pose else {
-            tracing::warn!(
-                "frame {}: no vehicle pose at its capture time; skipped",
-                frame.index
-            );
-            return None;
-        };
-        let i = &self.model.intrinsics;
-        if (frame.image.width, frame.image.height) != (i.width_px as usize, i.height_px as usize) {
-            tracing::error!(
-                "frame {} is {}x{} px but the calibration is for {}x{} px; skipped",
-                frame.index,
-                frame.image.width,
-                frame.image.height,
-                i.width_px,
-                i.height_px
-            );
-            return None;
-        }
-        let alt = pose.altitude_m().max(0.1);
-        let side_px = self.tag_size_m * i.fx_px / alt;
-        let roi = self
-            .model
-            .world_enu_to_pixel([prior.mean_enu.x, prior.mean_enu.y], 0.0, &pose)
-            .filter(|px| self.model.in_image(*px))
-            .map(|px| {
-                let sigma_m = prior.cov_m2.symmetric_eigenvalues().max().max(0.0).sqrt();
-                RoiPx::around(px, side_px, sigma_m * i.fx_px / alt)
-            });
-        let z = match self
-            .search
-            .detect(&frame.image, roi, &self.tag_ids, Some(side_px))
-        {
-            Ok((dets, how)) => dets.first().and_then(|d| {
-                stats.detections += 1;
-                if how == crate::vision::detector::SearchOutcome::Roi {
-                    stats.roi_hits += 1;
-                }
-                measure_tag(&self.model, &pose, d, &self.noise)
-                    .map(|m| Enu2::new(m.position_enu_m[0], m.position_enu_m[1]))
-            }),
-            Err(e) => {
-                tracing::warn!("frame {}: {e}", frame.index);
-                None
-            }
-        };
-        Some((pose, z))
-    }
-}
-
-/// The daemon's camera as the tracker sees it: the synthetic camera over the simulated
-/// world, or a real one; either may be frozen by fault injection.
-struct DaemonSensor {
-    shared: Arc<Shared>,
-    /// The synthetic camera (its frame seeds are drawn at every filter step, with or
-    /// without a real camera, so that a flight's random streams do not depend on it).
-    synthetic: RenderedSensor,
-    field: Option<FieldCamera>,
-    /// The camera's yaw on its mount (`daemon.camera_mount_rpy_rad`), rad: the view faces
-    /// the nose's heading turned by it.
-    mount_yaw_rad: f64,
-    /// The vehicle's pose from telemetry at this tick.
-    telemetry_pose: Option<VehiclePoseNed>,
-    /// The camera is frozen (fault injection) at this tick.
-    camera_frozen: bool,
-    /// The pose of the last observation (the frame's, with a real camera).
-    observed_pose: Option<VehiclePoseNed>,
-    /// Detection and projection time of the last frame, ms (rendering excluded).
-    detect_ms: f64,
-    frames_missed: u64,
-}
-
-impl Sensor for DaemonSensor {
-    type Error = std::convert::Infallible;
-
-    fn observe(
-        &mut self,
-        _t_s: f64,
-        view: &View,
-        prior: &Prior,
-    ) -> Result<Observation, Self::Error> {
-        let started = Instant::now();
-        let frame_seed = self.synthetic.next_frame_seed();
-        self.observed_pose = self.telemetry_pose;
-        let mut frozen = self.camera_frozen;
-        let field_look = match self.field.as_mut() {
-            Some(f) if !frozen => {
-                let look = f.look(&self.shared, prior, &mut self.synthetic.camera.stats);
-                if look.is_none() {
-                    frozen = true;
-                }
-                look
-            }
-            _ => None,
-        };
-        let observation = if frozen {
-            self.frames_missed += 1;
-            Observation::NoFrame
-        } else if let Some((pose, z)) = field_look {
-            self.observed_pose = Some(pose);
-            Observation::Frame {
-                taken_from: View::new(
-                    pose.position_enu(),
-                    heading::view_yaw_enu_of_nose(pose.yaw_rad, self.mount_yaw_rad),
-                ),
-                z,
-            }
-        } else {
-            let z = match self.synthetic.measure_with_seed(view, prior, frame_seed) {
-                Ok(z) => z,
-                Err(e) => {
-                    tracing::warn!("camera frame dropped: {e}");
-                    None
-                }
-            };
-            Observation::Frame {
-                taken_from: *view,
-                z,
-            }
-        };
-        // From the frame's capture (the end of its rendering) to its measurement.
-        let render_ms = if self.field.is_some() {
-            0.0
-        } else {
-            self.synthetic.camera.last_render_ms
-        };
-        self.detect_ms = started.elapsed().as_secs_f64() * 1e3 - render_ms;
-        Ok(observation)
-    }
-}
-
-/// The pipeline's state between ticks: the simulated target (on the synthetic camera), the
-/// camera, and the tracker.
+/// The pipeline's state between ticks: the camera (with the simulated world of the
+/// synthetic one), and the tracker.
 struct Pipeline {
     shared: Arc<Shared>,
     world: World,
     physics_dt_s: f64,
     guidance_budget_ms: f64,
     camera_timeout_s: f64,
-    rng_target: crate::rng::CoreRng,
-    target: TargetSim,
     sensor: DaemonSensor,
     tracker: Tracker,
     clock: MonotonicClock,
@@ -381,24 +191,29 @@ pub enum PipelineError {
     /// The real camera: no calibration file.
     #[error("daemon.calibration is needed with a real camera")]
     NoCalibration,
-    /// `target.trajectory` could not be read.
-    #[error(transparent)]
-    Config(#[from] crate::config::ConfigError),
+    /// The synthetic camera's world could not be built (its renderer, detector or target).
+    #[error("{0}")]
+    Synthetic(super::simulators::SimulatorError),
+    /// The synthetic camera was asked for and the program provides none.
+    #[error(
+        "daemon.camera = \"synthetic\" needs the simulator, which this program does not provide"
+    )]
+    NoSynthetic,
 }
 
 impl Pipeline {
-    fn build(
-        cfg: Config,
-        motion_name: &str,
-        seed: u64,
-        shared: Arc<Shared>,
-    ) -> Result<Self, PipelineError> {
+    fn build(start: Start, shared: Arc<Shared>) -> Result<Self, PipelineError> {
+        let Start {
+            cfg,
+            motion_name,
+            seed,
+            synthetic,
+            ..
+        } = start;
         let world = cfg.world();
-        let mut rng_target = stream_rng(seed, 0, Stream::Target, 0);
-        let rng_meas = stream_rng(seed, 0, Stream::Measurement, 0);
         let params = cfg.tracker_params(GuidanceKind::Eer, true);
-        let model = EstimatorKind::parse(motion_name)?
-            .build(&params.motion)
+        let model = EstimatorKind::parse(&motion_name)?
+            .build(&params.motion, &infotrack_dmmn::load_learned)
             .map_err(crate::tracker::TrackerError::from)?;
         let tracker = Tracker::new(
             params,
@@ -408,20 +223,16 @@ impl Pipeline {
             stream_rng(seed, 0, Stream::Filter, 0),
             stream_rng(seed, 0, Stream::Guidance, 0),
         )?;
-        let synthetic = RenderedSensor::new(VisionSensor::from_config(&cfg)?, rng_meas);
-        // A real camera replaces the simulated world's synthetic one.
-        let field = if cfg.daemon.camera == "synthetic" {
-            None
+        let frames = if cfg.daemon.camera == "synthetic" {
+            let build = synthetic.ok_or(PipelineError::NoSynthetic)?;
+            Frames::Synthetic(build(&cfg, &world, seed).map_err(PipelineError::Synthetic)?)
         } else {
-            Some(FieldCamera::open(&cfg)?)
+            Frames::Field(Box::new(FieldCamera::open(&cfg)?), VisionStats::default())
         };
-        // The daemon flies one run: the first recorded track, if any.
-        let target = TargetSim::for_run(&cfg, &world, 0, &mut rng_target)?;
         Ok(Self {
             sensor: DaemonSensor {
                 shared: shared.clone(),
-                synthetic,
-                field,
+                frames,
                 mount_yaw_rad: cfg.daemon.camera_mount_rpy_rad[2],
                 telemetry_pose: None,
                 camera_frozen: false,
@@ -434,8 +245,6 @@ impl Pipeline {
             physics_dt_s: 1.0 / cfg.timing.physics_hz,
             guidance_budget_ms: cfg.daemon.guidance_budget_ms,
             camera_timeout_s: cfg.daemon.camera_timeout_s,
-            rng_target,
-            target,
             tracker,
             clock: MonotonicClock::new(),
             out: PipelineOutput::default(),
@@ -450,7 +259,7 @@ impl Pipeline {
             rec.sync();
             self.out.records_failure = rec.failure().map(str::to_string);
         }
-        self.out.vision = self.sensor.synthetic.camera.stats;
+        self.out.vision = self.sensor.stats();
         self.out.frames_missed = self.sensor.frames_missed;
         self.out
     }
@@ -458,15 +267,15 @@ impl Pipeline {
     /// One physics tick: the simulated target moves; the tracker measures, estimates and
     /// decides when due; its outcome goes to the log, the status line and the supervisor.
     fn tick(&mut self) {
-        let synthetic = self.sensor.field.is_none();
-        if synthetic {
-            self.target
-                .step(&self.world.road, self.physics_dt_s, &mut self.rng_target);
-            if self.target.ended() {
-                self.shared
-                    .target_ended
-                    .store(true, std::sync::atomic::Ordering::Relaxed);
-            }
+        // The simulated target moves (with the synthetic camera): the truth of the records.
+        let truth = self.sensor.synthetic().map(|w| {
+            w.step_target(&self.world, self.physics_dt_s);
+            (w.target_ended(), w.target_enu())
+        });
+        if truth.is_some_and(|(ended, _)| ended) {
+            self.shared
+                .target_ended
+                .store(true, std::sync::atomic::Ordering::Relaxed);
         }
         let view = self.shared.supervisor_view();
         // Only ever set by `--inject pipeline-panic`, to prove the supervisor's hold.
@@ -477,9 +286,6 @@ impl Pipeline {
             self.last_pose = Some(s.pose);
         }
         self.sensor.telemetry_pose = self.last_pose;
-        self.sensor
-            .synthetic
-            .set_target(self.target.position_enu, self.target.heading_enu_rad);
         let input = TickInput {
             vehicle_enu: self.last_pose.map(|p| p.position_enu()),
             view_yaw_enu_rad: self.last_pose.map_or(NORTH_VIEW_YAW_ENU_RAD, |p| {
@@ -487,8 +293,8 @@ impl Pipeline {
             }),
             link_lost: snapshot.map_or(true, |s| s.link_lost),
             // No ground truth in the field.
-            truth_enu: synthetic.then_some(self.target.position_enu),
-            truth_velocity_enu: self.target.velocity_enu,
+            truth_enu: truth.map(|(_, (p, _))| p),
+            truth_velocity_enu: truth.map_or(Enu2::zeros(), |(_, (_, v))| v),
         };
         let out = match self.tracker.tick(&input, &mut self.sensor, &self.clock) {
             Ok(out) => out,
@@ -524,11 +330,7 @@ impl Pipeline {
         self.out.filter_ms.push(self.last_frame_ms);
         self.out.detect_ms.push(self.sensor.detect_ms);
         self.out.update_ms.push(step.update_ms);
-        self.shared
-            .from_pipeline
-            .lock()
-            .expect("shared poisoned")
-            .status = Some(Status {
+        self.shared.from_pipeline.lock().status = Some(Status {
             t_s: step.record.t_s,
             seen: step.record.measurement_enu.is_some(),
             n_eff: step.record.n_eff,
@@ -574,11 +376,7 @@ impl Pipeline {
             } => {
                 self.out.guidance_ms.push(compute_ms);
                 self.out.latency_ms.push(self.last_frame_ms + compute_ms);
-                self.shared
-                    .from_pipeline
-                    .lock()
-                    .expect("shared poisoned")
-                    .command = Some(command);
+                self.shared.from_pipeline.lock().command = Some(command);
             }
             Decision::Overrun { compute_ms } => {
                 self.out.guidance_ms.push(compute_ms);
@@ -615,6 +413,8 @@ pub struct Start {
     pub seed: u64,
     /// Where the records go as the flight goes, if anywhere.
     pub recorder: Option<super::recorder::FlightRecorder>,
+    /// Builds the synthetic camera's world (the program's simulator), if it has one.
+    pub synthetic: Option<super::simulators::BuildSyntheticWorld>,
 }
 
 /// Builds everything and reports on `ready`; then runs one physics tick for every message on
@@ -622,19 +422,14 @@ pub struct Start {
 /// supervisor sends ticks on the runtime's clock, wall-clock in the field and simulated in
 /// `infotrack sim --closed-loop`.
 pub fn run(
-    start: Start,
+    mut start: Start,
     shared: Arc<Shared>,
     ready: mpsc::Sender<Ready>,
     ticks: mpsc::Receiver<()>,
     done: mpsc::Sender<()>,
 ) -> PipelineOutput {
-    let Start {
-        cfg,
-        motion_name,
-        seed,
-        recorder,
-    } = start;
-    let mut p = match Pipeline::build(cfg, &motion_name, seed, shared) {
+    let recorder = start.recorder.take();
+    let mut p = match Pipeline::build(start, shared) {
         Ok(p) => p,
         Err(e) => {
             let _ = ready.send(Ready::Err(e));

@@ -157,7 +157,7 @@ impl FlightRecorder {
         };
         header(
             &mut steps,
-            &format!("{}\n", crate::report::csv::HEADER),
+            &format!("{}\n", crate::metrics::csv::HEADER),
             "steps.csv",
         )?;
         header(
@@ -185,7 +185,7 @@ impl FlightRecorder {
     /// when the tracking state changed, and rewrites the summary every few seconds from
     /// `all` (every record so far, this one included).
     pub fn record(&mut self, r: &FlightRecord, all: &[FlightRecord]) {
-        let row_steps = crate::report::csv::render_row(&r.step);
+        let row_steps = crate::metrics::csv::render_row(&r.step);
         let row_flight = flight_log::render_row(r);
         self.write(|s, f| {
             s.push(row_steps.as_bytes())?;

@@ -58,7 +58,7 @@ pub fn replay(
     // The streams the pipeline used, in the order it drew from them.
     let params = cfg.tracker_params(GuidanceKind::Eer, false);
     let model = EstimatorKind::parse(motion_name)?
-        .build(&params.motion)
+        .build(&params.motion, &infotrack_dmmn::load_learned)
         .map_err(crate::tracker::TrackerError::from)?;
     let mut tracker = Tracker::new(
         params,

@@ -43,7 +43,7 @@ pub(super) async fn track(
     signal: &mut ShutdownSignal,
 ) -> Tracked {
     let shared = &pipeline.shared;
-    shared.to_pipeline.lock().expect("shared poisoned").vehicle = snapshot(&vehicle.link);
+    shared.to_pipeline.lock().vehicle = snapshot(&vehicle.link);
     let ticker = tokio::spawn(drive_pipeline(
         ticks,
         done,
@@ -75,31 +75,8 @@ pub(super) async fn track(
             _ = &mut *signal => break StopReason::Signal,
             _ = tick.tick() => {}
         }
-        if began.elapsed().as_secs_f64() >= opts.duration_s {
-            break StopReason::Duration;
-        }
-        if shared.target_ended.load(Ordering::Relaxed) {
-            tracing::info!("the target's recorded track has ended: so does the flight");
-            break StopReason::Duration;
-        }
-        if pipeline.thread.is_finished() || ticker.is_finished() {
-            // The pipeline died (a panic): nothing decides any more; hold.
-            tracing::error!("the pipeline thread stopped; holding the vehicle");
-            break StopReason::Fault;
-        }
-        if let Some(o) = vehicle.link.state().origin_changed {
-            let text = "infotrack: vehicle origin changed in flight; holding";
-            eprintln!(
-                "the vehicle's GPS_GLOBAL_ORIGIN changed in flight (now {:.7}, {:.7}): the world \
-                 and its geofence would move; holding the vehicle",
-                o.lat_deg, o.lon_deg
-            );
-            sup.tell_gcs(
-                mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_CRITICAL,
-                text,
-            )
-            .await;
-            break StopReason::OriginChanged;
+        if let Some(why) = sup.reason_to_stop(began, pipeline, &ticker).await {
+            break why;
         }
         sup.switch_faults(began.elapsed().as_secs_f64());
         let snap = sup.feed_vehicle_state();
@@ -120,6 +97,44 @@ pub(super) async fn track(
 }
 
 impl Supervisor<'_> {
+    /// Why tracking must stop now, if it must: the duration is up, the target's recorded
+    /// track has ended, the pipeline died (a panic: nothing decides any more), or the
+    /// vehicle's origin moved (the world and its geofence would move with it).
+    async fn reason_to_stop(
+        &mut self,
+        began: Instant,
+        pipeline: &PipelineHandle,
+        ticker: &tokio::task::JoinHandle<()>,
+    ) -> Option<StopReason> {
+        if began.elapsed().as_secs_f64() >= self.opts.duration_s {
+            return Some(StopReason::Duration);
+        }
+        if self.shared.target_ended.load(Ordering::Relaxed) {
+            tracing::info!("the target's recorded track has ended: so does the flight");
+            return Some(StopReason::Duration);
+        }
+        if pipeline.thread.is_finished() || ticker.is_finished() {
+            // The pipeline died (a panic): nothing decides any more; hold.
+            tracing::error!("the pipeline thread stopped; holding the vehicle");
+            return Some(StopReason::Fault);
+        }
+        if let Some(o) = self.vehicle.link.state().origin_changed {
+            let text = "infotrack: vehicle origin changed in flight; holding";
+            eprintln!(
+                "the vehicle's GPS_GLOBAL_ORIGIN changed in flight (now {:.7}, {:.7}): the world \
+                 and its geofence would move; holding the vehicle",
+                o.lat_deg, o.lon_deg
+            );
+            self.tell_gcs(
+                mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_CRITICAL,
+                text,
+            )
+            .await;
+            return Some(StopReason::OriginChanged);
+        }
+        None
+    }
+
     /// Starts and ends the scheduled faults.
     fn switch_faults(&mut self, now_s: f64) {
         let mock = self.vehicle.mock.as_ref();
@@ -137,28 +152,14 @@ impl Supervisor<'_> {
                 if on { "begins" } else { "ends" }
             );
             match (f.kind, mock) {
-                (FaultKind::PipelinePanic, _) if on => {
-                    self.shared
-                        .to_pipeline
-                        .lock()
-                        .expect("shared poisoned")
-                        .panic = true
-                }
-                (FaultKind::CameraFreeze, _) => {
-                    self.shared
-                        .to_pipeline
-                        .lock()
-                        .expect("shared poisoned")
-                        .camera_frozen = on
-                }
+                (FaultKind::PipelinePanic, _) if on => self.shared.to_pipeline.lock().panic = true,
+                (FaultKind::CameraFreeze, _) => self.shared.to_pipeline.lock().camera_frozen = on,
                 (FaultKind::LinkCut, Some(m)) if on => {
                     m.cut_link(Duration::from_secs_f64(f.duration_s))
                 }
-                (FaultKind::PacketLoss(p), Some(m)) => m.set_faults(Faults {
-                    loss_percent: if on { p } else { 0.0 },
-                    seed: self.opts.seed,
-                    ..Faults::default()
-                }),
+                (FaultKind::PacketLoss(p), Some(m)) => {
+                    m.set_packet_loss(if on { p } else { 0.0 }, self.opts.seed)
+                }
                 _ => {}
             }
         }
@@ -171,11 +172,7 @@ impl Supervisor<'_> {
                 .filter(|(_, on)| **on)
                 .map(|(f, _)| f.kind.name())
                 .collect();
-            self.shared
-                .to_pipeline
-                .lock()
-                .expect("shared poisoned")
-                .faults = active.join("+");
+            self.shared.to_pipeline.lock().faults = active.join("+");
         }
     }
 
@@ -184,18 +181,10 @@ impl Supervisor<'_> {
     fn feed_vehicle_state(&mut self) -> Option<VehicleSnapshot> {
         let link = &self.vehicle.link;
         let snap = snapshot(link);
-        self.shared
-            .to_pipeline
-            .lock()
-            .expect("shared poisoned")
-            .vehicle = snap;
+        self.shared.to_pipeline.lock().vehicle = snap;
         if let (Some(sn), Some((at, _, _))) = (snap, link.state().local_ned) {
             // Stamped with the telemetry's arrival, for frames from a real camera.
-            self.shared
-                .poses
-                .lock()
-                .expect("shared poisoned")
-                .push(at, sn.pose);
+            self.shared.poses.lock().push(at, sn.pose);
         }
         let lost = link.state().lost;
         if lost != self.was_lost {

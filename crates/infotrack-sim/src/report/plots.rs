@@ -1,0 +1,294 @@
+//! PNG plots: the scene of a run, the metrics bar chart of all methods (like the paper's
+//! bar figure), and estimation error over time with occluded and out-of-view spans shaded
+//! (like the paper's per-run figure).
+
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use super::ReportError;
+use crate::sim::run::Snapshot;
+use crate::sim::MonteCarloResult;
+use infotrack_core::metrics::{MeanSd, StepRecord};
+use infotrack_core::world::World;
+
+fn plot_err(path: &Path, e: impl std::fmt::Display) -> ReportError {
+    ReportError::Plot {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+fn ensure_parent(path: &Path) -> Result<(), ReportError> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|source| ReportError::Io {
+            path: parent.to_path_buf(),
+            source,
+        })?;
+    }
+    Ok(())
+}
+
+const SNAPSHOT_COLOURS: [RGBColor; 3] = [
+    RGBColor(0, 150, 0),
+    RGBColor(230, 140, 0),
+    RGBColor(150, 0, 200),
+];
+
+/// The scene: workspace, roads, occlusions, target and agent tracks, particles at a few
+/// instants.
+fn draw_scene(
+    path: &Path,
+    title: &str,
+    world: &World,
+    steps: &[StepRecord],
+    snapshots: &[Snapshot],
+) -> Result<(), ReportError> {
+    ensure_parent(path)?;
+    let ws = world.workspace_enu;
+    let aspect = ws.height_m() / ws.width_m();
+    let w = 900u32;
+    let h = ((w as f64 * aspect) as u32 + 80).clamp(300, 1400);
+    let root = BitMapBackend::new(path, (w, h)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(50)
+        .build_cartesian_2d(ws.x_min_m..ws.x_max_m, ws.y_min_m..ws.y_max_m)
+        .map_err(|e| plot_err(path, e))?;
+    chart
+        .configure_mesh()
+        .x_desc("x east (m)")
+        .y_desc("y north (m)")
+        .draw()
+        .map_err(|e| plot_err(path, e))?;
+    for occ in &world.occlusions {
+        let pts: Vec<(f64, f64)> = occ.vertices().iter().map(|v| (v.x, v.y)).collect();
+        chart
+            .draw_series(std::iter::once(Polygon::new(pts, BLACK.mix(0.25).filled())))
+            .map_err(|e| plot_err(path, e))?;
+    }
+    for (a, b) in world.road.edges_enu() {
+        chart
+            .draw_series(LineSeries::new(
+                [(a.x, a.y), (b.x, b.y)],
+                BLACK.mix(0.5).stroke_width(2),
+            ))
+            .map_err(|e| plot_err(path, e))?;
+    }
+    for (k, snap) in snapshots.iter().enumerate() {
+        let colour = SNAPSHOT_COLOURS[k % SNAPSHOT_COLOURS.len()];
+        chart
+            .draw_series(
+                snap.particles_enu
+                    .iter()
+                    .filter(|p| ws.contains(p))
+                    .map(|p| Circle::new((p.x, p.y), 1, colour.mix(0.5).filled())),
+            )
+            .map_err(|e| plot_err(path, e))?
+            .label(format!("particles t = {:.0} s", snap.t_s))
+            .legend(move |(x, y)| Circle::new((x + 10, y), 3, colour.filled()));
+    }
+    chart
+        .draw_series(LineSeries::new(
+            steps.iter().map(|s| (s.target_enu.x, s.target_enu.y)),
+            BLUE.stroke_width(2),
+        ))
+        .map_err(|e| plot_err(path, e))?
+        .label("target")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+    chart
+        .draw_series(LineSeries::new(
+            steps.iter().map(|s| (s.agent_enu.x, s.agent_enu.y)),
+            RED.stroke_width(1),
+        ))
+        .map_err(|e| plot_err(path, e))?
+        .label("agent")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(1)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|e| plot_err(path, e))?;
+    root.present().map_err(|e| plot_err(path, e))
+}
+
+/// Estimation error over time; red spans: target occluded; grey spans: target outside the
+/// footprint.
+fn draw_estimation_error(
+    path: &Path,
+    title: &str,
+    steps: &[StepRecord],
+) -> Result<(), ReportError> {
+    ensure_parent(path)?;
+    let t_max = steps.last().map(|s| s.t_s).unwrap_or(1.0);
+    let e_max = steps
+        .iter()
+        .map(|s| s.estimation_error_m())
+        .fold(0.0, f64::max)
+        .max(1e-3)
+        * 1.1;
+    let root = BitMapBackend::new(path, (1000, 400)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..t_max, 0.0..e_max)
+        .map_err(|e| plot_err(path, e))?;
+    chart
+        .configure_mesh()
+        .x_desc("time (s)")
+        .y_desc("estimation error (m)")
+        .draw()
+        .map_err(|e| plot_err(path, e))?;
+    let dt = if steps.len() > 1 {
+        steps[1].t_s - steps[0].t_s
+    } else {
+        1.0
+    };
+    chart
+        .draw_series(
+            steps
+                .iter()
+                .filter(|s| !s.target_in_footprint && !s.target_occluded)
+                .map(|s| {
+                    Rectangle::new(
+                        [(s.t_s - dt, 0.0), (s.t_s, e_max)],
+                        BLACK.mix(0.12).filled(),
+                    )
+                }),
+        )
+        .map_err(|e| plot_err(path, e))?
+        .label("out of view")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 15, y + 5)], BLACK.mix(0.12).filled()));
+    chart
+        .draw_series(
+            steps.iter().filter(|s| s.target_occluded).map(|s| {
+                Rectangle::new([(s.t_s - dt, 0.0), (s.t_s, e_max)], RED.mix(0.2).filled())
+            }),
+        )
+        .map_err(|e| plot_err(path, e))?
+        .label("occluded")
+        .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 15, y + 5)], RED.mix(0.2).filled()));
+    chart
+        .draw_series(LineSeries::new(
+            steps.iter().map(|s| (s.t_s, s.estimation_error_m())),
+            BLUE.stroke_width(2),
+        ))
+        .map_err(|e| plot_err(path, e))?
+        .label("estimation error")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| plot_err(path, e))?;
+    root.present().map_err(|e| plot_err(path, e))
+}
+
+/// One bar chart per metric, one bar (mean, with a +-sd whisker) per method.
+fn draw_metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), ReportError> {
+    ensure_parent(path)?;
+    let root = BitMapBackend::new(path, (1200, 800)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
+    let panels = root.split_evenly((2, 2));
+    let names: Vec<String> = result
+        .results
+        .iter()
+        .map(|c| format!("{}/{}", c.guidance, c.motion))
+        .collect();
+    type Getter = fn(&crate::sim::monte_carlo::ComboResult) -> MeanSd;
+    let metrics: [(&str, Getter); 4] = [
+        ("tracking error (m)", |c| c.tracking_error_m),
+        ("estimation error (m)", |c| c.estimation_error_m),
+        ("det of covariance (m^4)", |c| c.cov_det),
+        ("%FOV", |c| c.fov_percent),
+    ];
+    for (panel, (label, get)) in panels.iter().zip(metrics) {
+        let vals: Vec<MeanSd> = result.results.iter().map(get).collect();
+        let top = vals
+            .iter()
+            .map(|v| v.mean + if v.sd.is_finite() { v.sd } else { 0.0 })
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max)
+            .max(1e-9)
+            * 1.15;
+        let n = vals.len().max(1) as f64;
+        let names_ref = &names;
+        let mut chart = ChartBuilder::on(panel)
+            .caption(label, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
+            .map_err(|e| plot_err(path, e))?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(vals.len().max(1))
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    names_ref.get(i as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .draw()
+            .map_err(|e| plot_err(path, e))?;
+        chart
+            .draw_series(vals.iter().enumerate().map(|(i, v)| {
+                let x = i as f64;
+                Rectangle::new(
+                    [(x - 0.3, 0.0), (x + 0.3, v.mean.max(0.0))],
+                    BLUE.mix(0.6).filled(),
+                )
+            }))
+            .map_err(|e| plot_err(path, e))?;
+        chart
+            .draw_series(
+                vals.iter()
+                    .enumerate()
+                    .filter(|(_, v)| v.sd.is_finite())
+                    .map(|(i, v)| {
+                        let x = i as f64;
+                        PathElement::new(
+                            vec![(x, (v.mean - v.sd).max(0.0)), (x, v.mean + v.sd)],
+                            BLACK.stroke_width(2),
+                        )
+                    }),
+            )
+            .map_err(|e| plot_err(path, e))?;
+    }
+    root.present().map_err(|e| plot_err(path, e))
+}
+
+/// The scene: workspace, roads, occlusions, target and agent tracks, particles at a few
+/// instants; written whole or not at all.
+pub fn scene(
+    path: &Path,
+    title: &str,
+    world: &World,
+    steps: &[StepRecord],
+    snapshots: &[Snapshot],
+) -> Result<(), ReportError> {
+    super::whole_file(path, |tmp| draw_scene(tmp, title, world, steps, snapshots))
+}
+
+/// The estimation error over time; written whole or not at all.
+pub fn estimation_error(path: &Path, title: &str, steps: &[StepRecord]) -> Result<(), ReportError> {
+    super::whole_file(path, |tmp| draw_estimation_error(tmp, title, steps))
+}
+
+/// One bar chart per metric, one bar (mean, with a +-sd whisker) per method; written whole
+/// or not at all.
+pub fn metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), ReportError> {
+    super::whole_file(path, |tmp| draw_metrics_bars(tmp, result))
+}
