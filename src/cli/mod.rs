@@ -13,6 +13,7 @@ pub mod numbers;
 pub mod params_cmd;
 pub mod run_cmd;
 pub mod sim_cmd;
+pub mod world_cmd;
 
 use std::path::Path;
 
