@@ -99,6 +99,7 @@ fn the_core_depends_on_numeric_and_data_crates_only() {
         "rand",
         "rand_chacha",
         "rand_distr",
+        "rstar",
         "serde",
         "sha2",
         "statrs",

@@ -43,7 +43,7 @@ mod escape;
 pub use commitment::{committed_choice, Centring};
 pub use escape::{speed_away_mps, weigh_by_escape, DEFAULT_SEARCH_ESCAPE_FLOOR};
 
-use super::entropy::{entropy_prior, log_sum_exp, log_transition_sums};
+use super::entropy::{entropy_prior, exp_or_zero, log_sum_exp, log_transition_sums};
 use super::view_heading::HeadingRule;
 use crate::estimation::{road_following, ParticleFilter};
 use crate::motion::{Histories, MotionError, MotionModel};
@@ -352,7 +352,7 @@ fn entropy_measured_fast(
     }
     let (mut sum, mut acc) = (0.0, 0.0);
     for ((b, lw), ls) in buf.iter().zip(log_w).zip(log_s) {
-        let e = (b - max).exp();
+        let e = exp_or_zero(b - max);
         if e > 0.0 {
             sum += e;
             // log l_i + log S_i, with log l_i = b - log w_i.
@@ -753,7 +753,8 @@ impl EerPlanner {
         }
         let lse = log_sum_exp(log_alpha.iter().cloned());
         inp.alpha.clear();
-        inp.alpha.extend(log_alpha.iter().map(|a| (a - lse).exp()));
+        inp.alpha
+            .extend(log_alpha.iter().map(|a| exp_or_zero(a - lse)));
         Ok(&self.inputs)
     }
 

@@ -16,13 +16,27 @@
 use crate::world::geometry::Enu2;
 use crate::world::measurement::Gaussian2;
 
+/// `exp(x)`, with the arguments whose exponential rounds to zero (`exp` returns +0 below
+/// -745.14; the cut is at -746) answered without calling it: glibc takes a slow
+/// path for every result that underflows (setting errno), and a belief spread over a town
+/// measured against a metre's noise underflows for nearly every pair. The same bits either
+/// way.
+#[inline]
+pub fn exp_or_zero(x: f64) -> f64 {
+    if x < -746.0 {
+        0.0
+    } else {
+        x.exp()
+    }
+}
+
 /// log(sum_i exp(a_i)), stable; `-inf` for an empty or all `-inf` input.
 pub fn log_sum_exp(a: impl Iterator<Item = f64> + Clone) -> f64 {
     let max = a.clone().fold(f64::NEG_INFINITY, f64::max);
     if max == f64::NEG_INFINITY {
         return f64::NEG_INFINITY;
     }
-    max + a.map(|v| (v - max).exp()).sum::<f64>().ln()
+    max + a.map(|v| exp_or_zero(v - max)).sum::<f64>().ln()
 }
 
 /// Quadratic forms beyond this contribute exp(-700) or less.
@@ -65,7 +79,7 @@ pub fn log_transition_sums(
             for (cj, wj) in centres.iter().zip(weights) {
                 let dx = p.x - cj.x;
                 let dy = p.y - cj.y;
-                acc += (-0.5 * (a * dx * dx + 2.0 * b * dx * dy + c * dy * dy)).exp() * wj;
+                acc += exp_or_zero(-0.5 * (a * dx * dx + 2.0 * b * dx * dy + c * dy * dy)) * wj;
             }
             s[i] = norm * acc;
         }
@@ -83,7 +97,7 @@ pub fn entropy_with_likelihood(log_l: &[f64], w: &[f64], log_s: &[f64]) -> f64 {
         if lw == f64::NEG_INFINITY {
             continue;
         }
-        let w_post = (lw - lse).exp();
+        let w_post = exp_or_zero(lw - lse);
         acc += w_post * (log_l[i] + log_s[i]);
     }
     lse - acc

@@ -5,6 +5,7 @@ use rand::Rng;
 use super::geometry::Enu2;
 use serde::{Deserialize, Serialize};
 
+mod nearby;
 mod route;
 mod traffic;
 pub use route::RoadPath;
@@ -71,8 +72,13 @@ pub struct RoadNetwork {
     pub nodes: Vec<RoadNode>,
     /// Index of the start node.
     pub start: usize,
-    /// Every directed edge as its end points, world ENU.
+    /// Every directed edge as its end points, world ENU (nodes in order, each node's exits
+    /// in order).
     segments: Vec<(Enu2, Enu2)>,
+    /// The (from, to) node indices of each of `segments`.
+    edge_ends: Vec<(usize, usize)>,
+    /// `segments` by where they lie.
+    nearby: nearby::SegmentIndex,
     /// [`NEAR_EDGE_SHARE`] of the shortest edge, m (infinite without edges).
     near_tolerance_m: f64,
     /// The roads as an undirected graph weighed by length ([`Self::path_between`]).
@@ -139,11 +145,20 @@ impl RoadNetwork {
             nodes,
             start,
             segments: Vec::new(),
+            edge_ends: Vec::new(),
+            nearby: Default::default(),
             near_tolerance_m: f64::INFINITY,
             graph: Default::default(),
             traffic_per_m: Vec::new(),
         };
         road.segments = road.edges_enu();
+        road.edge_ends = road
+            .nodes
+            .iter()
+            .enumerate()
+            .flat_map(|(u, n)| n.next.iter().map(move |&(v, _)| (u, v)))
+            .collect();
+        road.nearby = nearby::SegmentIndex::new(&road.segments);
         road.traffic_per_m = traffic::traffic_per_m(&road.nodes);
         road.graph = route::undirected_graph(&road);
         let shortest = road
@@ -158,24 +173,38 @@ impl RoadNetwork {
 
     /// Distance from `p` to the nearest road, m (infinite without roads).
     pub fn distance_to_roads(&self, p: &Enu2) -> f64 {
-        self.segments
-            .iter()
-            .map(|(a, b)| distance_to_segment(p, a, b))
-            .fold(f64::INFINITY, f64::min)
+        self.nearest_distance(p, |_| true)
     }
 
     /// Distances from `p` to the nearest road, and to the nearest road one may drive in
     /// the direction `heading` (a unit vector, world ENU): an edge whose allowed direction
     /// lies within [`ALONG_HEADING_COS`] of it. m; infinite where there is none.
     pub fn distances_to_roads(&self, p: &Enu2, heading: &Enu2) -> (f64, f64) {
-        self.segments
-            .iter()
-            .fold((f64::INFINITY, f64::INFINITY), |(any, along), (a, b)| {
-                let d = distance_to_segment(p, a, b);
-                let len = (b - a).norm();
-                let agrees = len > 0.0 && (b - a).dot(heading) >= ALONG_HEADING_COS * len;
-                (any.min(d), if agrees { along.min(d) } else { along })
-            })
+        let agrees = |k: usize| {
+            let (a, b) = self.segments[k];
+            let len = (b - a).norm();
+            len > 0.0 && (b - a).dot(heading) >= ALONG_HEADING_COS * len
+        };
+        (self.distance_to_roads(p), self.nearest_distance(p, agrees))
+    }
+
+    /// Distance from `p` to the nearest segment `keep` admits, m (infinite without one):
+    /// the nearest such segment by the index, then every segment within a hair of it, each
+    /// measured as a scan of all would measure it.
+    fn nearest_distance(&self, p: &Enu2, keep: impl Fn(usize) -> bool) -> f64 {
+        let distance = |k: usize| {
+            let (a, b) = self.segments[k];
+            distance_to_segment(p, &a, &b)
+        };
+        let Some(first) = self.nearby.nearest_first(p).find(|k| keep(*k)) else {
+            return f64::INFINITY;
+        };
+        self.nearby
+            .within(p, nearby::reach(distance(first)))
+            .into_iter()
+            .filter(|k| keep(*k))
+            .map(distance)
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Samples the node after `from` by its transition probabilities.
@@ -389,25 +418,27 @@ impl RoadNetwork {
             heading
                 .is_some_and(|h| e.overshoot_m <= 0.0 && e.direction.dot(&h) >= ALONG_HEADING_COS)
         };
-        // One pass for the nearest edge's distance and the nearest one the point lies
-        // alongside and goes the way of (it runs per particle in the re-route and EER's
-        // rollout).
-        let (nearest, nearest_its_way) =
-            self.edge_projections(p)
-                .fold((f64::INFINITY, f64::INFINITY), |(any, its_way), e| {
-                    let its_way = if goes_its_way(&e) {
-                        its_way.min(e.distance_m)
-                    } else {
-                        its_way
-                    };
-                    (any.min(e.distance_m), its_way)
-                });
+        // The nearest edge's distance from the index; then the edges about as near, in the
+        // network's order (the first of equal costs wins, as in a scan of every edge).
+        let first = self
+            .nearby
+            .nearest_first(p)
+            .find_map(|k| self.projection(k, p))?;
+        let nearest = self
+            .projections_within(p, nearby::reach(first.distance_m))
+            .fold(f64::INFINITY, |any, e| any.min(e.distance_m));
         // The heading chooses only among the edges about as near as the nearest: with it
         // weighed against any distance (before session 25, a 90-degree difference as 1 km),
         // a slow track 10 m short of a junction whose velocity's noise pointed east was put
         // on the start of an east-going road 390 m back, and a track just past a gentle bend
         // back on the road before it, 58 m behind (BENCHMARKS "Field scale, part 23").
         let near = 2.0 * nearest + self.near_tolerance_m;
+        let candidates: Vec<EdgeProjection> =
+            self.projections_within(p, nearby::reach(near)).collect();
+        let nearest_its_way = candidates
+            .iter()
+            .filter(|e| goes_its_way(e))
+            .fold(f64::INFINITY, |its_way, e| its_way.min(e.distance_m));
         // A point beyond an edge's end is not on it: its projection is the end node. Chosen
         // by the heading alone, a car 29 m past a junction and 8 m beside its new road (it
         // had cut the corner), heading 23 degrees off that road, was put back on the road it
@@ -417,7 +448,7 @@ impl RoadNetwork {
         // part 38").
         let alongside = nearest_its_way <= near;
         let mut best: Option<(f64, (usize, usize, f64))> = None;
-        for e in self.edge_projections(p) {
+        for e in candidates {
             if e.distance_m > near || (alongside && !goes_its_way(&e)) {
                 continue;
             }
@@ -434,27 +465,37 @@ impl RoadNetwork {
         best.map(|(_, e)| e)
     }
 
-    /// Every edge of positive length with `p`'s projection on it.
-    fn edge_projections<'a>(&'a self, p: &'a Enu2) -> impl Iterator<Item = EdgeProjection> + 'a {
-        self.nodes.iter().enumerate().flat_map(move |(u, node)| {
-            node.next.iter().filter_map(move |&(v, _)| {
-                let a = node.position_enu;
-                let d = self.nodes[v].position_enu - a;
-                let len = d.norm();
-                if len <= 1e-9 {
-                    return None;
-                }
-                let direction = d / len;
-                let along = (p - a).dot(&direction);
-                let s = along.clamp(0.0, len);
-                Some(EdgeProjection {
-                    distance_m: (a + direction * s - p).norm(),
-                    direction,
-                    overshoot_m: (along - len).max(-along).max(0.0),
-                    edge: (u, v, s),
-                })
-            })
+    /// `p`'s projection on segment `k`, if the segment has a length.
+    fn projection(&self, k: usize, p: &Enu2) -> Option<EdgeProjection> {
+        let (u, v) = self.edge_ends[k];
+        let a = self.nodes[u].position_enu;
+        let d = self.nodes[v].position_enu - a;
+        let len = d.norm();
+        if len <= 1e-9 {
+            return None;
+        }
+        let direction = d / len;
+        let along = (p - a).dot(&direction);
+        let s = along.clamp(0.0, len);
+        Some(EdgeProjection {
+            distance_m: (a + direction * s - p).norm(),
+            direction,
+            overshoot_m: (along - len).max(-along).max(0.0),
+            edge: (u, v, s),
         })
+    }
+
+    /// `p`'s projections on the edges of positive length within `r` of it (and perhaps a
+    /// few more), in the network's order.
+    fn projections_within<'a>(
+        &'a self,
+        p: &'a Enu2,
+        r: f64,
+    ) -> impl Iterator<Item = EdgeProjection> + 'a {
+        self.nearby
+            .within(p, r)
+            .into_iter()
+            .filter_map(move |k| self.projection(k, p))
     }
 
     /// Collects the part of edge u->v (from `s0` metres along it, `travelled` metres of path
