@@ -112,10 +112,15 @@ impl TryFrom<&RoadConfig> for RoadNetwork {
     type Error = RoadError;
 
     fn try_from(c: &RoadConfig) -> Result<Self, RoadError> {
+        // Id -> the first node with it: a lookup per edge, not a scan (a town has thousands).
+        let mut by_id = std::collections::HashMap::with_capacity(c.nodes.len());
+        for (k, n) in c.nodes.iter().enumerate() {
+            by_id.entry(n.id).or_insert(k);
+        }
         let index = |id: u32, what: &dyn Fn() -> String| {
-            c.nodes
-                .iter()
-                .position(|n| n.id == id)
+            by_id
+                .get(&id)
+                .copied()
                 .ok_or_else(|| RoadError::UnknownNode { what: what(), id })
         };
         let mut next = vec![Vec::new(); c.nodes.len()];
