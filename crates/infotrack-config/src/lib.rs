@@ -586,3 +586,13 @@ pub(crate) fn read_user_file(path: &Path, limit: u64) -> Result<String, ConfigEr
         },
     })
 }
+
+impl From<infotrack_core::check::InvalidValue> for ConfigError {
+    fn from(e: infotrack_core::check::InvalidValue) -> Self {
+        ConfigError::Invalid {
+            key: e.key,
+            value: e.value,
+            reason: e.reason,
+        }
+    }
+}

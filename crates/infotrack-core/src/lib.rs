@@ -13,6 +13,7 @@
 //! frame the paper's scenario is written in.
 #![deny(missing_docs)]
 
+pub mod check;
 pub mod estimation;
 pub mod frames;
 pub mod geodesy;

@@ -2,6 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::check::{count, covariance, in_unit, invalid, non_negative, positive, Checked};
+
 /// The particle filter.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -52,4 +54,60 @@ pub struct KalmanConfig {
 
 fn default_hypothesis_injection() -> f64 {
     0.02
+}
+
+impl FilterConfig {
+    /// Checks the road terms of `filter` (`hypothesis_injection`, `road_sigma_m`).
+    pub fn check_road_terms(&self) -> Checked {
+        in_unit("filter.hypothesis_injection", self.hypothesis_injection)?;
+        match self.road_sigma_m {
+            Some(s) => non_negative("filter.road_sigma_m", s),
+            None => Ok(()),
+        }
+    }
+
+    /// Checks the rest of `filter`: counts, the noise, the thresholds and shares.
+    pub fn check(&self) -> Checked {
+        count("filter.particles", self.particles)?;
+        count("filter.history_len", self.history_len)?;
+        if self.history_len < 2 {
+            return Err(invalid(
+                "filter.history_len",
+                self.history_len,
+                "must be at least 2 (a velocity needs two positions)",
+            ));
+        }
+        covariance("filter.process_noise_cov_m2", &self.process_noise_cov_m2)?;
+        in_unit("filter.resample_threshold", self.resample_threshold)?;
+        in_unit("filter.reseed_threshold", self.reseed_threshold)?;
+        if self.reseed_threshold > self.resample_threshold {
+            return Err(invalid(
+                "filter.reseed_threshold",
+                self.reseed_threshold,
+                "must not exceed filter.resample_threshold",
+            ));
+        }
+        non_negative("filter.roughening", self.roughening)?;
+        if !(self.miss_probability > 0.0 && self.miss_probability <= 1.0) {
+            return Err(invalid(
+                "filter.miss_probability",
+                self.miss_probability,
+                "must lie in (0, 1]",
+            ));
+        }
+        in_unit("filter.max_outside_fraction", self.max_outside_fraction)
+    }
+}
+
+impl KalmanConfig {
+    /// Checks `kalman`: every variance positive.
+    pub fn check(&self) -> Checked {
+        for (i, v) in self.process_noise_diag.iter().enumerate() {
+            positive(&format!("kalman.process_noise_diag[{i}]"), *v)?;
+        }
+        for (i, v) in self.initial_cov_diag.iter().enumerate() {
+            positive(&format!("kalman.initial_cov_diag[{i}]"), *v)?;
+        }
+        Ok(())
+    }
 }

@@ -2,6 +2,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::check::{count, covariance, in_unit, invalid, non_negative, positive, Checked};
+use crate::world::geometry::BoundsEnu;
+
 use super::LawnConfig;
 
 /// Guidance laws.
@@ -88,4 +91,87 @@ pub struct GuidanceConfig {
     pub view_heading: Option<crate::guidance::ViewHeading>,
     /// The lawnmower sweep.
     pub lawn: LawnConfig,
+}
+
+impl GuidanceConfig {
+    /// Checks `guidance` (the lawnmower's table apart: [`LawnConfig::check`]).
+    pub fn check(&self) -> Checked {
+        count("guidance.entropy_particles", self.entropy_particles)?;
+        if let Some(n) = self.entropy_particles_concentrated {
+            count("guidance.entropy_particles_concentrated", n)?;
+        }
+        count(
+            "guidance.measurements_per_particle",
+            self.measurements_per_particle,
+        )?;
+        count("guidance.horizon_steps", self.horizon_steps)?;
+        count("guidance.candidate_grid_side", self.candidate_grid_side)?;
+        covariance(
+            "guidance.entropy_kernel_cov_m2",
+            &self.entropy_kernel_cov_m2,
+        )?;
+        if let Some(t) = self.intercept_within_s {
+            positive("guidance.intercept_within_s", t)?;
+        }
+        self.check_shares()
+    }
+
+    fn check_shares(&self) -> Checked {
+        for (key, share) in [
+            ("guidance.search_commitment", self.search_commitment),
+            ("guidance.centring_share", self.centring_share),
+        ] {
+            if let Some(share) = share.filter(|s| !(0.0..=1.0).contains(s)) {
+                return Err(invalid(
+                    key,
+                    share,
+                    "must be a share of the EER range, from 0 to 1",
+                ));
+            }
+        }
+        if let Some(t) = self.ambush_window_s {
+            non_negative("guidance.ambush_window_s", t)?;
+        }
+        if let Some(floor) = self.search_escape_floor {
+            in_unit("guidance.search_escape_floor", floor)?;
+        }
+        Ok(())
+    }
+}
+
+impl LawnConfig {
+    /// Checks `guidance.lawn`: legs and their ends inside the workspace `ws`.
+    pub fn check(&self, ws: &BoundsEnu) -> Checked {
+        if self.legs_x_m.is_empty() {
+            return Err(invalid(
+                "guidance.lawn.legs_x_m",
+                &self.legs_x_m,
+                "needs at least one leg",
+            ));
+        }
+        if let Some(x) = self
+            .legs_x_m
+            .iter()
+            .find(|x| !x.is_finite() || **x < ws.x_min_m || **x > ws.x_max_m)
+        {
+            return Err(invalid(
+                "guidance.lawn.legs_x_m",
+                x,
+                "leg lies outside the workspace",
+            ));
+        }
+        let (y_min, y_max) = (self.y_min_m, self.y_max_m);
+        if !(y_min < y_max && y_min >= ws.y_min_m && y_max <= ws.y_max_m) {
+            return Err(invalid(
+                "guidance.lawn.y_max_m",
+                [y_min, y_max],
+                "need y_min_m < y_max_m, both inside the workspace",
+            ));
+        }
+        positive("guidance.lawn.point_spacing_m", self.point_spacing_m)?;
+        non_negative(
+            "guidance.lawn.track_measurement_for_s",
+            self.track_measurement_for_s,
+        )
+    }
 }

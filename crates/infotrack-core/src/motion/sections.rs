@@ -30,3 +30,10 @@ pub struct MotionConfig {
 fn default_dmmn_model() -> PathBuf {
     PathBuf::from(super::DEFAULT_MODEL_PATH)
 }
+
+impl MotionConfig {
+    /// Checks `motion`: a top speed.
+    pub fn check(&self) -> crate::check::Checked {
+        crate::check::positive("motion.cv_max_speed_mps", self.cv_max_speed_mps)
+    }
+}

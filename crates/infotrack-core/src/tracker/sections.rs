@@ -2,6 +2,10 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::check::{invalid, positive, Checked};
+use crate::world::geometry::{BoundsEnu, Enu2};
+use crate::world::road::RoadNetwork;
+
 /// Loop rates and run length.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -38,4 +42,99 @@ pub struct AcquisitionConfig {
     /// by length alone (before session 55). Absent: `traffic`.
     #[serde(default)]
     pub prior: Option<crate::world::road::RoadWeighting>,
+}
+
+impl TimingConfig {
+    /// Checks `timing`: positive rates, physics at least as fast as the loops it drives.
+    pub fn check(&self) -> Checked {
+        positive("timing.filter_hz", self.filter_hz)?;
+        positive("timing.guidance_hz", self.guidance_hz)?;
+        positive("timing.physics_hz", self.physics_hz)?;
+        positive("timing.duration_s", self.duration_s)?;
+        if self.physics_hz < self.filter_hz || self.physics_hz < self.guidance_hz {
+            return Err(invalid(
+                "timing.physics_hz",
+                self.physics_hz,
+                "must be at least timing.filter_hz and timing.guidance_hz",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl AcquisitionConfig {
+    /// Checks `acquisition`: a radius, a slowest speed up to `cv_max_speed_mps`
+    /// (`motion.cv_max_speed_mps`), a cue inside the workspace `ws` with a road of `roads`
+    /// within its radius.
+    pub fn check(&self, ws: &BoundsEnu, cv_max_speed_mps: f64, roads: &RoadNetwork) -> Checked {
+        positive("acquisition.cue_radius_m", self.cue_radius_m)?;
+        if let Some(v) = self.min_speed_mps {
+            if !(v.is_finite() && (0.0..=cv_max_speed_mps).contains(&v)) {
+                return Err(invalid(
+                    "acquisition.min_speed_mps",
+                    v,
+                    &format!("must lie in [0, motion.cv_max_speed_mps = {cv_max_speed_mps}] m/s"),
+                ));
+            }
+        }
+        let cue = Enu2::new(self.cue_enu_m[0], self.cue_enu_m[1]);
+        if !(cue.x.is_finite() && cue.y.is_finite() && ws.contains(&cue)) {
+            return Err(invalid(
+                "acquisition.cue_enu_m",
+                self.cue_enu_m,
+                &format!(
+                    "must lie inside the workspace (workspace_enu: x {}..{}, y {}..{})",
+                    ws.x_min_m, ws.x_max_m, ws.y_min_m, ws.y_max_m
+                ),
+            ));
+        }
+        if roads.length_within(Some((cue, self.cue_radius_m))) <= 0.0 {
+            return Err(invalid(
+                "acquisition.cue_enu_m",
+                self.cue_enu_m,
+                &format!(
+                    "no road lies within acquisition.cue_radius_m = {} m of the cue: the target \
+                     drives on the roads, so the cue must be near one",
+                    self.cue_radius_m
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cue_must_lie_near_a_road_inside_the_workspace() {
+        let lab = crate::testing::Config::default_lab();
+        let roads = RoadNetwork::try_from(&lab.road).expect("the lab's roads");
+        let node = &lab.road.nodes[0];
+        let mut cue = AcquisitionConfig {
+            cue_enu_m: [node.x_m, node.y_m],
+            cue_radius_m: 20.0,
+            min_speed_mps: None,
+            prior: None,
+        };
+        let ws = &lab.workspace_enu;
+        let v_max = lab.motion.cv_max_speed_mps;
+        assert_eq!(cue.check(ws, v_max, &roads), Ok(()));
+        cue.min_speed_mps = Some(v_max + 0.1);
+        let e = cue.check(ws, v_max, &roads).unwrap_err();
+        assert_eq!(e.key, "acquisition.min_speed_mps");
+        cue.min_speed_mps = None;
+        cue.cue_enu_m = [ws.x_max_m + 1.0, node.y_m];
+        let e = cue.check(ws, v_max, &roads).unwrap_err();
+        assert_eq!(e.key, "acquisition.cue_enu_m");
+    }
+
+    #[test]
+    fn physics_must_be_at_least_as_fast_as_the_loops() {
+        let mut timing = crate::testing::Config::default_lab().timing;
+        assert_eq!(timing.check(), Ok(()));
+        timing.physics_hz = timing.filter_hz / 2.0;
+        assert_eq!(timing.check().unwrap_err().key, "timing.physics_hz");
+    }
 }

@@ -5,6 +5,7 @@ use rand::Rng;
 use super::geometry::Enu2;
 use serde::{Deserialize, Serialize};
 
+mod check;
 mod nearby;
 mod route;
 mod traffic;
