@@ -72,12 +72,20 @@ fn grid_config(junctions: usize) -> Config {
     };
     let centre = BLOCK_M * (side / 2) as f64;
     cfg.acquisition = Some(AcquisitionConfig {
-        cue_enu_m: [centre, centre],
+        cue_enu_m: Some([centre, centre]),
         cue_radius_m: 150.0,
         min_speed_mps: None,
         prior: None,
     });
     cfg
+}
+
+/// East of the cue of [`grid_config`], m.
+fn centre_east(cfg: &Config) -> f64 {
+    cfg.acquisition
+        .as_ref()
+        .and_then(|a| a.cue_enu_m)
+        .expect("grid_config sets a cue")[0]
 }
 
 /// A tracker on `cfg` that has searched for 20 s without seeing the target, the drone
@@ -96,7 +104,7 @@ fn searching(cfg: &Config) -> (Tracker, f64) {
         stream_rng(1, 0, Stream::Guidance, 0),
     )
     .expect("the tracker builds");
-    let over = Enu2::new(cfg.acquisition.as_ref().unwrap().cue_enu_m[0], 0.0);
+    let over = Enu2::new(centre_east(cfg), 0.0);
     let dt = cfg.filter_dt_s();
     let mut t_s = 0.0;
     while t_s < 20.0 {
@@ -129,7 +137,7 @@ fn network_scale(c: &mut Criterion) {
         let cfg = grid_config(junctions);
         let n = cfg.road.nodes.len();
         let (mut tracker, mut t_s) = searching(&cfg);
-        let over = Enu2::new(cfg.acquisition.as_ref().unwrap().cue_enu_m[0], 0.0);
+        let over = Enu2::new(centre_east(&cfg), 0.0);
         let dt = cfg.filter_dt_s();
         g.bench_with_input(BenchmarkId::new("filter_step", n), &n, |b, _| {
             b.iter(|| {

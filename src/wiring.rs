@@ -92,6 +92,7 @@ struct SimulatedScene {
     target: TargetSim,
     rng_target: CoreRng,
     camera: RenderedSensor,
+    cue: Option<(Enu2, f64)>,
 }
 
 impl SimulatedScene {
@@ -103,6 +104,7 @@ impl SimulatedScene {
         let camera = RenderedSensor::new(VisionSensor::from_config(cfg)?, rng_meas);
         let target = TargetSim::for_run(cfg, world, 0, &mut rng_target)?;
         let mut scene = Self {
+            cue: target.cue(cfg),
             target,
             rng_target,
             camera,
@@ -125,6 +127,10 @@ impl SyntheticWorld for SimulatedScene {
 
     fn target_ended(&self) -> bool {
         self.target.ended()
+    }
+
+    fn track_cue(&self) -> Option<(Enu2, f64)> {
+        self.cue
     }
 
     fn target_enu(&self) -> (Enu2, Enu2) {

@@ -790,6 +790,65 @@ fn a_recorded_track_is_the_target_and_its_end_ends_the_run() {
     );
 }
 
+/// Without `acquisition.cue_enu_m` each run is cued where its recorded track starts: the
+/// belief starts there, not at the config's cue 600 m away; without a track the key is needed.
+#[test]
+fn a_recorded_track_without_a_cue_is_cued_where_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows: Vec<String> = std::iter::once("t_s,x_m,y_m".to_string())
+        .chain((0..=39).map(|i| format!("{i},600,{}", 400 - 10 * i)))
+        .collect();
+    std::fs::write(dir.path().join("car.csv"), rows.join("\n") + "\n").unwrap();
+    let outdoor = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml");
+    let no_cue = std::fs::read_to_string(outdoor)
+        .unwrap()
+        .replace("cue_enu_m = [20.0, 10.0]\n", "");
+    let cfg = dir.path().join("no-cue.toml");
+    std::fs::write(&cfg, &no_cue).unwrap();
+    let o = infotrack()
+        .args(["sim", "--runs", "1", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success()
+            && err.contains("acquisition.cue_enu_m")
+            && err.contains("target.trajectory"),
+        "{err}"
+    );
+    let text = no_cue.replace("[target]", "[target]\ntrajectory = \"car.csv\"");
+    std::fs::write(&cfg, text).unwrap();
+    let cfg = cfg.to_str().unwrap();
+    let args = [
+        "--config",
+        cfg,
+        "--runs",
+        "1",
+        "--guidance",
+        "truth",
+        "--motion",
+        "cv",
+        "--quiet",
+    ];
+    let (o, _, out) = sim_to_files(dir.path(), &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let steps = std::fs::read_to_string(out.join("truth_cv/run000.csv")).unwrap();
+    let first: Vec<f64> = steps
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap_or(f64::NAN))
+        .collect();
+    let (ex, ey) = (first[10], first[11]);
+    let from_start = (ex - 600.0).hypot(ey - 400.0);
+    assert!(
+        from_start < 150.0,
+        "the belief starts at the track's start: ({ex}, {ey})"
+    );
+}
+
 /// Laws compared on the same seeds are compared in pairs: per metric the mean difference with
 /// its 95 % CI, d_z, the paired t and Wilcoxon tests, and Holm's correction, printed and in
 /// the JSON.

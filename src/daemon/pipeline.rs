@@ -211,7 +211,16 @@ impl Pipeline {
             ..
         } = start;
         let world = cfg.world();
-        let params = cfg.tracker_params(GuidanceKind::Eer, true);
+        let frames = if cfg.daemon.camera == "synthetic" {
+            let build = synthetic.ok_or(PipelineError::NoSynthetic)?;
+            Frames::Synthetic(build(&cfg, &world, seed).map_err(PipelineError::Synthetic)?)
+        } else {
+            Frames::Field(Box::new(FieldCamera::open(&cfg)?), VisionStats::default())
+        };
+        let mut params = cfg.tracker_params(GuidanceKind::Eer, true);
+        if let Frames::Synthetic(scene) = &frames {
+            params.cue = params.cue.or(scene.track_cue());
+        }
         let model = EstimatorKind::parse(&motion_name)?
             .build(&params.motion, &infotrack_dmmn::load_learned)
             .map_err(crate::tracker::TrackerError::from)?;
@@ -223,12 +232,6 @@ impl Pipeline {
             stream_rng(seed, 0, Stream::Filter, 0),
             stream_rng(seed, 0, Stream::Guidance, 0),
         )?;
-        let frames = if cfg.daemon.camera == "synthetic" {
-            let build = synthetic.ok_or(PipelineError::NoSynthetic)?;
-            Frames::Synthetic(build(&cfg, &world, seed).map_err(PipelineError::Synthetic)?)
-        } else {
-            Frames::Field(Box::new(FieldCamera::open(&cfg)?), VisionStats::default())
-        };
         Ok(Self {
             sensor: DaemonSensor {
                 shared: shared.clone(),

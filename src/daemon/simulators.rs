@@ -36,6 +36,9 @@ pub trait SyntheticWorld {
     fn step_target(&mut self, world: &World, dt_s: f64);
     /// Whether the target's recorded track has ended.
     fn target_ended(&self) -> bool;
+    /// The cue (centre world ENU, radius m) where the target's recorded track starts, when
+    /// the config leaves `acquisition.cue_enu_m` to the track.
+    fn track_cue(&self) -> Option<(Enu2, f64)>;
     /// The target's position and velocity, world ENU.
     fn target_enu(&self) -> (Enu2, Enu2);
     /// Draws the next frame's noise seed (at every filter step, frozen camera or not).

@@ -15,13 +15,7 @@ pub(super) fn validate(c: &Config) -> Result<(), ConfigError> {
     c.road.check(&c.workspace_enu)?;
     validate_vision(c)?;
     validate_daemon(c)?;
-    if let Some(a) = &c.acquisition {
-        a.check(
-            &c.workspace_enu,
-            c.motion.cv_max_speed_mps,
-            &c.road_network(),
-        )?;
-    }
+    validate_acquisition(c)?;
     validate_world(c)?;
     c.filter.check_road_terms()?;
     validate_start_gate(c)?;
@@ -231,4 +225,21 @@ fn validate_world(c: &Config) -> Result<(), ConfigError> {
         ));
     }
     Ok(positive("world.origin_tolerance_m", w.origin_tolerance_m)?)
+}
+
+/// The core checks the cue; a cue may be left out only where recorded tracks give it.
+fn validate_acquisition(c: &Config) -> Result<(), ConfigError> {
+    let Some(a) = &c.acquisition else {
+        return Ok(());
+    };
+    let roads = c.road_network();
+    a.check(&c.workspace_enu, c.motion.cv_max_speed_mps, &roads)?;
+    if a.cue_enu_m.is_none() && c.target.trajectory.is_none() {
+        return Err(invalid(
+            "acquisition.cue_enu_m",
+            "(absent)",
+            "needed unless target.trajectory gives recorded tracks, whose starts cue each run",
+        ));
+    }
+    Ok(())
 }

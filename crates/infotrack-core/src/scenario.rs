@@ -260,10 +260,19 @@ impl Scenario<'_> {
         (sigma > 0.0).then_some(sigma)
     }
 
-    /// The operator's cue as a region (centre, radius), world ENU.
+    /// The operator's cue as a region (centre, radius), world ENU; `None` without one, or
+    /// when each run is cued where its recorded track starts ([`Self::cue_at_track_start`]).
     pub fn cue_region(&self) -> Option<(Enu2, f64)> {
-        self.acquisition
-            .map(|a| (Enu2::new(a.cue_enu_m[0], a.cue_enu_m[1]), a.cue_radius_m))
+        let a = self.acquisition?;
+        let [x, y] = a.cue_enu_m?;
+        Some((Enu2::new(x, y), a.cue_radius_m))
+    }
+
+    /// The cue's radius when each run is cued where its recorded track starts
+    /// (`[acquisition]` without `cue_enu_m`): the cue is then `(track start, this radius)`.
+    pub fn cue_at_track_start(&self) -> Option<f64> {
+        let a = self.acquisition?;
+        a.cue_enu_m.is_none().then_some(a.cue_radius_m)
     }
 
     /// The speeds the search from the cue gives its hypotheses before the first sighting,

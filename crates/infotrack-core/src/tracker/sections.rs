@@ -25,8 +25,11 @@ pub struct TimingConfig {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AcquisitionConfig {
-    /// Where the target is said to be, `[x, y]` in the world ENU frame, metres.
-    pub cue_enu_m: [f64; 2],
+    /// Where the target is said to be, `[x, y]` in the world ENU frame, metres. Absent with
+    /// a recorded target (`target.trajectory`): each run is cued where its track starts
+    /// (the simulator knows it; an operator would say it). Needed otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cue_enu_m: Option<[f64; 2]>,
     /// How sure: the target is on a road within this radius of the cue, metres.
     pub cue_radius_m: f64,
     /// The slowest speed the search from the cue assumes the target drives at, m/s: the
@@ -64,8 +67,8 @@ impl TimingConfig {
 
 impl AcquisitionConfig {
     /// Checks `acquisition`: a radius, a slowest speed up to `cv_max_speed_mps`
-    /// (`motion.cv_max_speed_mps`), a cue inside the workspace `ws` with a road of `roads`
-    /// within its radius.
+    /// (`motion.cv_max_speed_mps`), a cue (when given) inside the workspace `ws` with a road
+    /// of `roads` within its radius.
     pub fn check(&self, ws: &BoundsEnu, cv_max_speed_mps: f64, roads: &RoadNetwork) -> Checked {
         positive("acquisition.cue_radius_m", self.cue_radius_m)?;
         if let Some(v) = self.min_speed_mps {
@@ -77,11 +80,14 @@ impl AcquisitionConfig {
                 ));
             }
         }
-        let cue = Enu2::new(self.cue_enu_m[0], self.cue_enu_m[1]);
+        let Some(cue_enu_m) = self.cue_enu_m else {
+            return Ok(());
+        };
+        let cue = Enu2::new(cue_enu_m[0], cue_enu_m[1]);
         if !(cue.x.is_finite() && cue.y.is_finite() && ws.contains(&cue)) {
             return Err(invalid(
                 "acquisition.cue_enu_m",
-                self.cue_enu_m,
+                cue_enu_m,
                 &format!(
                     "must lie inside the workspace (workspace_enu: x {}..{}, y {}..{})",
                     ws.x_min_m, ws.x_max_m, ws.y_min_m, ws.y_max_m
@@ -91,7 +97,7 @@ impl AcquisitionConfig {
         if roads.length_within(Some((cue, self.cue_radius_m))) <= 0.0 {
             return Err(invalid(
                 "acquisition.cue_enu_m",
-                self.cue_enu_m,
+                cue_enu_m,
                 &format!(
                     "no road lies within acquisition.cue_radius_m = {} m of the cue: the target \
                      drives on the roads, so the cue must be near one",
@@ -113,7 +119,7 @@ mod tests {
         let roads = RoadNetwork::try_from(&lab.road).expect("the lab's roads");
         let node = &lab.road.nodes[0];
         let mut cue = AcquisitionConfig {
-            cue_enu_m: [node.x_m, node.y_m],
+            cue_enu_m: Some([node.x_m, node.y_m]),
             cue_radius_m: 20.0,
             min_speed_mps: None,
             prior: None,
@@ -125,7 +131,7 @@ mod tests {
         let e = cue.check(ws, v_max, &roads).unwrap_err();
         assert_eq!(e.key, "acquisition.min_speed_mps");
         cue.min_speed_mps = None;
-        cue.cue_enu_m = [ws.x_max_m + 1.0, node.y_m];
+        cue.cue_enu_m = Some([ws.x_max_m + 1.0, node.y_m]);
         let e = cue.check(ws, v_max, &roads).unwrap_err();
         assert_eq!(e.key, "acquisition.cue_enu_m");
     }

@@ -241,7 +241,7 @@ fn the_prior_from_a_cue_follows_the_traffic_at_a_fork() {
     let east_over_north = |prior| {
         let mut c = outdoor_config();
         c.acquisition = Some(crate::tracker::sections::AcquisitionConfig {
-            cue_enu_m: [600.0, 0.0],
+            cue_enu_m: Some([600.0, 0.0]),
             cue_radius_m: 100.0,
             min_speed_mps: None,
             prior,
@@ -276,7 +276,7 @@ fn the_prior_is_on_the_roads_within_the_cue() {
     let mut c = outdoor_config();
     let (cue, r) = (Enu2::new(600.0, 200.0), 120.0);
     c.acquisition = Some(crate::tracker::sections::AcquisitionConfig {
-        cue_enu_m: [cue.x, cue.y],
+        cue_enu_m: Some([cue.x, cue.y]),
         cue_radius_m: r,
         min_speed_mps: None,
         prior: None,

@@ -129,7 +129,8 @@ pub fn run_once(cfg: &Config, world: &World, spec: &RunSpec) -> Result<RunOutput
         0.0
     };
     let seen = world.clone().with_detection_margin(margin_m);
-    let params = cfg.tracker_params(spec.guidance, false);
+    let mut params = cfg.tracker_params(spec.guidance, false);
+    params.cue = params.cue.or(target.cue(cfg));
     let model = spec
         .estimator
         .build(&params.motion, &infotrack_dmmn::load_learned)

@@ -76,6 +76,17 @@ impl TargetSim {
         })
     }
 
+    /// The cue of a run whose target drives a recorded track and whose config leaves
+    /// `acquisition.cue_enu_m` out: where the track starts, with the config's radius.
+    pub fn cue(
+        &self,
+        cfg: &infotrack_config::Config,
+    ) -> Option<(infotrack_core::frames::Enu2, f64)> {
+        let radius_m = cfg.scenario().cue_at_track_start()?;
+        let (track, _) = self.recorded.as_ref()?;
+        Some((track.at(0.0).0, radius_m))
+    }
+
     /// Whether a recorded track has ended (never, for the simulated car).
     pub fn ended(&self) -> bool {
         self.recorded
