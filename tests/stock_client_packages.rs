@@ -1,4 +1,4 @@
-//! The mock flown by the stock clients themselves, installed from PyPI by `scripts/setup.sh`
+//! The mock flown by the stock clients themselves, installed from PyPI by `scripts/setup-tests.sh`
 //! into `.deps/stock-clients` (pinned in `tests/stock_clients/requirements.txt`): MAVSDK (the
 //! C++ library through its Python binding) flies the PX4 mock; pymavlink's mavutil and
 //! MAVProxy's console fly the ArduPilot mock. Each client runs its script in
@@ -21,7 +21,7 @@ fn stock_python() -> PathBuf {
     let python = root.join(".deps/stock-clients/bin/python");
     assert!(
         python.exists(),
-        "{} is missing: run `bash scripts/setup.sh` (it installs MAVSDK, pymavlink and MAVProxy \
+        "{} is missing: run `bash scripts/setup-tests.sh` (it installs MAVSDK, pymavlink and MAVProxy \
          from PyPI into .deps/stock-clients)",
         python.display()
     );

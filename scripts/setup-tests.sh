@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Installs what the tests and benchmarks need beyond scripts/setup.sh (which the main job
+# needs too): pinned Python environments under .deps/ and Debian's osmium-tool.
+# - .deps/stock-clients: the stock MAVLink clients (MAVSDK, pymavlink, MAVProxy) the tests
+#   fly the mock with;
+# - .deps/stats: SciPy, which the paired statistics are checked against;
+# - .deps/sumo: Eclipse SUMO and sumolib, the reference traffic (scripts/sumo-traffic.py);
+# - osmium-tool: cuts an OpenStreetMap .pbf extract to XML for SUMO's netconvert.
+# Idempotent: does nothing when everything is present.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# A virtual environment DIR with the pinned packages of REQ, made again when REQ changes.
+venv_from() { # venv_from DIR REQ WHAT
+  if ! cmp -s "$2" "$1/installed-requirements.txt" 2>/dev/null; then
+    echo "setup: installing $3 ($2) into $1" >&2
+    rm -rf "$1"
+    python3 -m venv "$1"
+    "$1/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
+      --only-binary=:all: -r "$2"
+    cp "$2" "$1/installed-requirements.txt"
+  fi
+}
+
+venv_from .deps/stock-clients tests/stock_clients/requirements.txt "the stock MAVLink clients"
+venv_from .deps/stats tests/stats/requirements.txt "SciPy"
+
+venv_from .deps/sumo tests/sumo/requirements.txt "Eclipse SUMO"
+
+if ! dpkg -s osmium-tool >/dev/null 2>&1; then
+  echo "setup-tests: installing Debian's osmium-tool" >&2
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq osmium-tool >/dev/null
+fi
