@@ -224,9 +224,12 @@ def waypoint_route(net, edges, rng, length_m):
 def background_trips(args, net, work, seed, log):
     """randomTrips.py's background traffic over the whole run."""
     trips = os.path.join(work, f"background-{seed}.trips.xml")
+    # randomTrips validates through duarouter, whose routes go to ./routes.rou.xml unless
+    # told otherwise; they belong in the work folder.
+    routes = os.path.join(work, f"background-{seed}.rou.xml")
     tool = os.path.join(sumo_home(), "tools", "randomTrips.py")
     end = args.warmup + args.duration + 60
-    run([sys.executable, tool, "-n", net, "-o", trips, "-b", "0", "-e", str(end),
+    run([sys.executable, tool, "-n", net, "-o", trips, "-r", routes, "-b", "0", "-e", str(end),
          "--insertion-density", str(args.traffic_density), "--fringe-factor", "5",
          "--min-distance", "300", "--seed", str(seed), "--validate",
          "--prefix", "bg", "--trip-attributes", 'departLane="best"'], log)

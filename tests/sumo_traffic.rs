@@ -19,9 +19,12 @@ fn sumo_python() -> PathBuf {
     python
 }
 
-/// Runs the script with `args` into `out`; panics with its output if it fails.
+/// Runs the script with `args` into `out` from a scratch working folder; panics with its
+/// output if it fails or leaves anything in the folder it was started from.
 fn sumo_traffic(out: &Path, args: &[&str]) {
+    let cwd = tempfile::tempdir().unwrap();
     let o = Command::new(sumo_python())
+        .current_dir(cwd.path())
         .arg(root().join("scripts/sumo-traffic.py"))
         .args(args)
         .arg("--out")
@@ -34,6 +37,15 @@ fn sumo_traffic(out: &Path, args: &[&str]) {
         "{}{}",
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
+    );
+    let stray: Vec<_> = std::fs::read_dir(cwd.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert!(
+        stray.is_empty(),
+        "sumo-traffic.py wrote {stray:?} into its working folder"
     );
 }
 
