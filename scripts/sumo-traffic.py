@@ -304,12 +304,13 @@ def keep_track(args, fcd, i):
 
 def fly_tracks(args, tracks):
     """The imported config flies the tracks, each run cued where its track starts: the
-    GeoJSON's cue goes, `[acquisition]` keeps its radius."""
+    GeoJSON's cue goes, `[acquisition]` keeps its radius and slowest speed."""
     gj_path = os.path.join(args.out, f"{args.name}.geojson")
     with open(gj_path) as f:
         gj = json.load(f)
     cues = [f for f in gj["features"] if f["properties"].get("infotrack") == "cue"]
     radius = cues[0]["properties"]["radius_m"] if cues else 150.0
+    min_speed = cues[0]["properties"].get("min_speed_mps", 0.0) if cues else 0.0
     gj["features"] = [f for f in gj["features"] if f not in cues]
     with open(gj_path, "w") as f:
         json.dump(gj, f, indent=1)
@@ -320,7 +321,7 @@ def fly_tracks(args, tracks):
     files = ", ".join(f'"{t}"' for t in tracks)
     text = text.replace("[target]\n", f"[target]\ntrajectory = [{files}]\n", 1)
     text += (f"\n# Each run is cued where its recorded track starts (cue_enu_m left out).\n"
-             f"[acquisition]\ncue_radius_m = {radius}\n")
+             f"[acquisition]\ncue_radius_m = {radius}\nmin_speed_mps = {min_speed}\n")
     with open(toml_path, "w") as f:
         f.write(text)
 

@@ -44,7 +44,7 @@ fn area() -> serde_json::Value {
         feature("road", line(&[(100.0, 0.3), (200.0, 0.0)]), json!({"oneway": false, "p": 0.3})),
         feature("occlusion", poly(&[(90.0, 90.0), (110.0, 90.0), (110.0, 110.0), (90.0, 110.0)]), json!({"name": "barn"})),
         feature("geofence", poly(&[(-50.0, -50.0), (250.0, -50.0), (250.0, 150.0), (-50.0, 150.0)]), json!({})),
-        feature("cue", json!({"type": "Point", "coordinates": lonlat(50.0, 0.0)}), json!({"radius_m": 80.0})),
+        feature("cue", json!({"type": "Point", "coordinates": lonlat(50.0, 0.0)}), json!({"radius_m": 80.0, "min_speed_mps": 0.0})),
         {"type": "Feature", "geometry": {"type": "Point", "coordinates": lonlat(5.0, 5.0)}, "properties": {"name": "a tree"}},
     ]})
 }
@@ -142,6 +142,7 @@ fn roads_occlusions_geofence_and_cue_load_as_world_enu_metres() {
     assert!(
         cue.cue_enu_m.is_some_and(|[x, y]| close(x, y, (50.0, 0.0))) && cue.cue_radius_m == 80.0
     );
+    assert_eq!(cue.min_speed_mps, Some(0.0));
 }
 
 #[test]
@@ -190,6 +191,12 @@ fn what_is_wrong_in_the_file_or_given_twice_is_named() {
     bad["features"][0]["properties"]["p"] = json!(0.9);
     let err = refused(dir.path(), &bad);
     assert!(err.contains("summing to"), "{err}");
+
+    // A cue's slowest speed that is not a number, named with its feature.
+    let mut bad = area();
+    bad["features"][4]["properties"]["min_speed_mps"] = json!("slow");
+    let err = refused(dir.path(), &bad);
+    assert!(err.contains("min_speed_mps") && err.contains("feature 4"), "{err}");
 
     // No origin to place the file.
     let path = config_with(

@@ -13,7 +13,8 @@
 //! * `"occlusion"`: a Polygon (its outer ring) where the target cannot be seen; `"name"`.
 //! * `"geofence"`: a Polygon whose bounding rectangle (east/north) is the workspace and
 //!   geofence.
-//! * `"cue"`: a Point, the operator's cue, with `"radius_m"`.
+//! * `"cue"`: a Point, the operator's cue, with `"radius_m"` (and optionally
+//!   `"min_speed_mps"`, `acquisition.min_speed_mps`).
 //!
 //! Positions are `[longitude, latitude]` in that order (RFC 7946). A section given both in
 //! the config and in the file is refused (which one wins would be a guess); occlusions from
@@ -421,6 +422,9 @@ fn cue_of(
         points(&[en(coordinates)?]).as_array().unwrap()[0].clone(),
     );
     t.insert("cue_radius_m".into(), radius.into());
+    if let Some(v) = number(f, "min_speed_mps")? {
+        t.insert("min_speed_mps".into(), v.into());
+    }
     Ok(toml::Value::Table(t))
 }
 
