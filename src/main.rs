@@ -120,27 +120,50 @@ fn keep_freed_memory() {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn keep_freed_memory() {}
 
+/// The log on stderr (filtered by `--log`, else `RUST_LOG`, else `warn`) and, while a
+/// flight folder is open, its `daemon.log` (the same filter when one is given, else `info`:
+/// a folder keeps the flight's story even when the terminal shows warnings only).
+fn init_logging(log: Option<&str>) {
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    use tracing_subscriber::{EnvFilter, Layer};
+    let given = match log {
+        Some(f) => Some((f.to_string(), "--log")),
+        None => match std::env::var("RUST_LOG") {
+            Ok(f) if !f.trim().is_empty() => Some((f, "RUST_LOG")),
+            _ => None,
+        },
+    };
+    let parse = |default: &str| match &given {
+        Some((f, origin)) => EnvFilter::try_new(f).unwrap_or_else(|_| {
+            eprintln!("warning: {origin} `{f}` is not a valid log filter; using `{default}`");
+            EnvFilter::new(default)
+        }),
+        None => EnvFilter::new(default),
+    };
+    // Colour codes only on a terminal: a journal or a log file gets plain text.
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let terminal = tracing_subscriber::fmt::layer()
+        .with_ansi(ansi)
+        .with_writer(std::io::stderr)
+        .with_filter(parse("warn"));
+    let folder = tracing_subscriber::fmt::layer()
+        .with_ansi(false)
+        .with_writer(cli::folder_log::FolderLog)
+        .with_filter(
+            EnvFilter::try_new(given.as_ref().map_or("info", |g| &g.0))
+                .unwrap_or_else(|_| EnvFilter::new("info")),
+        );
+    tracing_subscriber::registry()
+        .with(terminal)
+        .with(folder)
+        .init();
+}
+
 fn main() -> ExitCode {
     keep_freed_memory();
     let cli = Cli::parse();
-    let (filter, origin) = match &cli.log {
-        Some(f) => (f.clone(), "--log"),
-        None => match std::env::var("RUST_LOG") {
-            Ok(f) if !f.trim().is_empty() => (f, "RUST_LOG"),
-            _ => ("warn".to_string(), "the default"),
-        },
-    };
-    let filter = tracing_subscriber::EnvFilter::try_new(&filter).unwrap_or_else(|_| {
-        eprintln!("warning: {origin} `{filter}` is not a valid log filter; using `warn`");
-        tracing_subscriber::EnvFilter::new("warn")
-    });
-    // Colour codes only on a terminal: a journal or a log file gets plain text.
-    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(ansi)
-        .with_writer(std::io::stderr)
-        .init();
+    init_logging(cli.log.as_deref());
     let result = match cli.command {
         Command::Sim(a) => sim(a),
         Command::Run(a) => runtime().and_then(|rt| run_cmd::run(a, rt)),

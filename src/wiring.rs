@@ -66,6 +66,13 @@ async fn start_mock(cfg: &Config, flavor: Flavor) -> Result<StartedVehicle, Simu
     let port = free_udp_port()?;
     let mut mc = MockConfig::new(flavor);
     mc.seed = cfg.seed;
+    // A world placed on the globe ([world] origin) is flown where it is: the mock's local
+    // origin is the world's, as a SITL started with its home there would have it.
+    if let Some(w) = &cfg.world {
+        mc.origin_lat_deg = w.origin.lat_deg;
+        mc.origin_lon_deg = w.origin.lon_deg;
+        mc.origin_alt_m = w.origin.alt_m;
+    }
     if cfg.daemon.mock_response == MockResponse::Sitl {
         mc.answer_as_sitl();
     }

@@ -196,7 +196,10 @@ fn what_is_wrong_in_the_file_or_given_twice_is_named() {
     let mut bad = area();
     bad["features"][4]["properties"]["min_speed_mps"] = json!("slow");
     let err = refused(dir.path(), &bad);
-    assert!(err.contains("min_speed_mps") && err.contains("feature 4"), "{err}");
+    assert!(
+        err.contains("min_speed_mps") && err.contains("feature 4"),
+        "{err}"
+    );
 
     // No origin to place the file.
     let path = config_with(

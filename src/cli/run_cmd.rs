@@ -10,6 +10,9 @@ use infotrack::config::Config;
 use infotrack::daemon::{self, flight_log, DaemonReport, RunOptions};
 use infotrack::report;
 
+use super::flight_figures::{percentile, Resources};
+use super::flight_folder::FlightFolder;
+
 /// Arguments of `infotrack run`.
 #[derive(clap::Args)]
 pub struct RunArgs {
@@ -54,15 +57,6 @@ pub struct RunArgs {
     /// in-process mock. Refused without it.
     #[arg(long)]
     allow_auto_engage: bool,
-}
-
-fn percentile(v: &[f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    s[((s.len() - 1) as f64 * p).round() as usize]
 }
 
 /// The results table of one daemon run.
@@ -195,7 +189,38 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         },
         simulators: infotrack::wiring::simulators(),
     };
-    fly(&cfg, &opts, out.as_deref(), Clock::Wall(rt))
+    fly_into(
+        &cfg,
+        a.config.as_deref(),
+        &opts,
+        out.as_deref(),
+        Clock::Wall(rt),
+    )
+}
+
+/// [`fly`], with the flight folder `out` (if any) made to explain itself
+/// ([`FlightFolder`]): marked failed, with the reason, when the flight fails. `source`: the
+/// config file (`None`: the embedded default).
+pub fn fly_into(
+    cfg: &Config,
+    source: Option<&std::path::Path>,
+    opts: &RunOptions,
+    out: Option<&std::path::Path>,
+    clock: Clock,
+) -> Result<()> {
+    let Some(dir) = out else {
+        return fly(cfg, opts, None, clock).map(|_| ());
+    };
+    let folder = FlightFolder::begin(dir, cfg, source, opts.seed)?;
+    match fly(cfg, opts, Some(dir), clock) {
+        Ok(report) => folder.flown(&report),
+        Err(e) => {
+            if let Err(also) = folder.failed(&format!("{e:#}")) {
+                eprintln!("error: {also:#}");
+            }
+            Err(e)
+        }
+    }
 }
 
 /// Which clock a flight runs on.
@@ -206,13 +231,14 @@ pub enum Clock {
     Simulated,
 }
 
-/// Flies the daemon and prints the table; writes the logs and plots into `out`.
+/// Flies the daemon and prints the table; writes the logs and plots into `out`; the
+/// daemon's report (an error when the flight failed or its records could not be written).
 pub fn fly(
     cfg: &Config,
     opts: &RunOptions,
     out: Option<&std::path::Path>,
     clock: Clock,
-) -> Result<()> {
+) -> Result<DaemonReport> {
     let motion = opts.motion.clone();
     let cpu_before = cpu_seconds();
     let wall = std::time::Instant::now();
@@ -220,19 +246,16 @@ pub fn fly(
         Clock::Wall(rt) => rt.block_on(daemon::run(cfg, opts))?,
         Clock::Simulated => daemon::run_simulated(cfg, opts)?,
     };
-    let cpu = cpu_seconds() - cpu_before;
+    let resources = Resources {
+        cpu_s: cpu_seconds() - cpu_before,
+        wall_s: wall.elapsed().as_secs_f64(),
+        flown_s: report.output.records.last().map_or(0.0, |r| r.step.t_s),
+        peak_rss_mb: peak_rss_mb(),
+    };
     print!("{}", table(&report, &motion));
-    let flown_s = report.output.records.last().map_or(0.0, |r| r.step.t_s);
-    println!(
-        "resources: {:.0}% of one core over {:.1} s of wall time for {:.1} s of flight ({:.1}x real time), peak resident memory {:.0} MB",
-        100.0 * cpu / wall.elapsed().as_secs_f64(),
-        wall.elapsed().as_secs_f64(),
-        flown_s,
-        flown_s / wall.elapsed().as_secs_f64(),
-        peak_rss_mb()
-    );
+    println!("{}", resources.line());
     if let Some(dir) = out {
-        write_flight_folder(dir, cfg, &report)?;
+        write_flight_folder(dir, cfg, &report, &resources)?;
     }
     if report.stopped_by == daemon::StopReason::OriginChanged {
         bail!(
@@ -240,12 +263,17 @@ pub fn fly(
              and its geofence: tracking stopped and the vehicle was put in hold"
         );
     }
-    Ok(())
+    Ok(report)
 }
 
 /// The flight's plots and summary into `dir` (its records were written as it flew); an
 /// error names what could not be written.
-fn write_flight_folder(dir: &std::path::Path, cfg: &Config, report: &DaemonReport) -> Result<()> {
+fn write_flight_folder(
+    dir: &std::path::Path,
+    cfg: &Config,
+    report: &DaemonReport,
+    resources: &Resources,
+) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let steps: Vec<_> = report
         .output
@@ -276,7 +304,7 @@ fn write_flight_folder(dir: &std::path::Path, cfg: &Config, report: &DaemonRepor
             "closed loop: estimation error",
             &steps,
         ),
-        final_summary(dir, report),
+        final_summary(dir, report, resources),
     ];
     let failed: Vec<_> = written.into_iter().filter_map(Result::err).collect();
     for e in &failed {
@@ -297,27 +325,33 @@ fn write_flight_folder(dir: &std::path::Path, cfg: &Config, report: &DaemonRepor
         );
     }
     println!(
-        "wrote steps.csv, flight.csv, link.tlog, scene.png, estimation_error.png and summary.json to {}",
+        "wrote steps.csv, flight.csv, link.tlog, scene.png, estimation_error.png, summary.json, config.toml, flight.json and daemon.log to {}",
         dir.display()
     );
     Ok(())
 }
 
 /// `summary.json` at the end: whole unless the records stopped early.
-fn final_summary(dir: &std::path::Path, r: &DaemonReport) -> Result<(), report::ReportError> {
+fn final_summary(
+    dir: &std::path::Path,
+    r: &DaemonReport,
+    resources: &Resources,
+) -> Result<(), report::ReportError> {
     let partial = r
         .output
         .records_failure
         .as_deref()
         .map(|why| format!("the records stopped early: {why}"));
     let path = dir.join("summary.json");
+    let json_error = |source| report::ReportError::Json {
+        path: path.clone(),
+        source,
+    };
     let bytes =
-        daemon::recorder::summary_json(&r.summary, partial.as_deref()).map_err(|source| {
-            report::ReportError::Json {
-                path: path.clone(),
-                source,
-            }
-        })?;
+        daemon::recorder::summary_json(&r.summary, partial.as_deref()).map_err(json_error)?;
+    let mut v: serde_json::Value = serde_json::from_slice(&bytes).map_err(json_error)?;
+    v["flight"] = super::flight_figures::figures(r, resources);
+    let bytes = serde_json::to_vec_pretty(&v).map_err(json_error)?;
     report::write_file(&path, &bytes)
 }
 
@@ -349,17 +383,57 @@ fn peak_rss_mb() -> f64 {
 pub struct ReplayArgs {
     /// The `--out` folder of an `infotrack run` (its flight.csv is read).
     dir: PathBuf,
-    /// The configuration the flight used (default: the embedded config/default.toml).
+    /// The configuration to replay with (default: the folder's config.toml, the flight's
+    /// own; for a folder without one, the embedded config/default.toml).
     #[arg(long)]
     config: Option<PathBuf>,
 }
 
+/// The config a replay uses, and the line that says which.
+fn replay_config(a: &ReplayArgs) -> Result<(Config, String)> {
+    if let Some(p) = &a.config {
+        return Ok((
+            Config::load(p)?,
+            format!("config: {} (--config)", p.display()),
+        ));
+    }
+    let own = a.dir.join("config.toml");
+    if own.exists() {
+        let said = format!("config: {} (the flight's own)", own.display());
+        return Ok((Config::load(&own)?, said));
+    }
+    Ok((
+        Config::default_lab(),
+        format!(
+            "config: the embedded default (config/default.toml): {} has no config.toml; give the flight's with --config",
+            a.dir.display()
+        ),
+    ))
+}
+
+/// A folder whose `flight.json` says the flight failed before it flew has nothing to
+/// replay: say why it failed instead of what its empty records lack.
+fn refuse_a_failed_start(dir: &std::path::Path) -> Result<()> {
+    let Ok(text) = std::fs::read_to_string(dir.join("flight.json")) else {
+        return Ok(());
+    };
+    let manifest: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not JSON", dir.join("flight.json").display()))?;
+    if manifest["outcome"] == "failed" {
+        bail!(
+            "{} is a flight that failed before it flew ({}): nothing to replay",
+            dir.display(),
+            manifest["failure"].as_str().unwrap_or("no reason recorded")
+        );
+    }
+    Ok(())
+}
+
 /// Re-runs estimation and guidance on a recorded flight and compares.
 pub fn replay(a: ReplayArgs) -> Result<()> {
-    let cfg = match &a.config {
-        Some(p) => Config::load(p)?,
-        None => Config::default_lab(),
-    };
+    refuse_a_failed_start(&a.dir)?;
+    let (cfg, which) = replay_config(&a)?;
+    println!("{which}");
     let path = a.dir.join("flight.csv");
     /// A flight log is ~100 bytes a filter step: an hour at 10 Hz is ~4 MB.
     const MAX_FLIGHT_LOG_BYTES: u64 = 1 << 30;

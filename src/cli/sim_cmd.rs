@@ -95,7 +95,13 @@ fn sim_closed_loop(a: SimArgs) -> Result<()> {
         permits: Default::default(),
         simulators: infotrack::wiring::simulators(),
     };
-    run_cmd::fly(&cfg, &opts, a.out.as_deref(), run_cmd::Clock::Simulated)
+    run_cmd::fly_into(
+        &cfg,
+        a.config.as_deref(),
+        &opts,
+        a.out.as_deref(),
+        run_cmd::Clock::Simulated,
+    )
 }
 
 pub fn sim(a: SimArgs) -> Result<()> {

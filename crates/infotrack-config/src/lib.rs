@@ -361,7 +361,8 @@ impl TrajectoryFiles {
         }
     }
 
-    fn files_mut(&mut self) -> Vec<&mut PathBuf> {
+    /// The track files, to change (resolve or rewrite) their paths.
+    pub fn files_mut(&mut self) -> Vec<&mut PathBuf> {
         match self {
             Self::One(p) => vec![p],
             Self::Many(v) => v.iter_mut().collect(),
