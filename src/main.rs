@@ -14,7 +14,8 @@ use clap::{Parser, Subcommand};
 )]
 struct Cli {
     /// Log filter (tracing syntax), e.g. `warn`, `infotrack=debug`; without it, the
-    /// `RUST_LOG` environment variable, else `warn`.
+    /// `RUST_LOG` environment variable, else `warn` (`run`: its flight's story at `info` too,
+    /// `warn,infotrack=info,infotrack_link=info`).
     #[arg(long, global = true)]
     log: Option<String>,
     #[command(subcommand)]
@@ -120,10 +121,10 @@ fn keep_freed_memory() {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn keep_freed_memory() {}
 
-/// The log on stderr (filtered by `--log`, else `RUST_LOG`, else `warn`) and, while a
+/// The log on stderr (filtered by `--log`, else `RUST_LOG`, else `default`) and, while a
 /// flight folder is open, its `daemon.log` (the same filter when one is given, else `info`:
 /// a folder keeps the flight's story even when the terminal shows warnings only).
-fn init_logging(log: Option<&str>) {
+fn init_logging(log: Option<&str>, default: &str) {
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
     use tracing_subscriber::{EnvFilter, Layer};
@@ -146,7 +147,7 @@ fn init_logging(log: Option<&str>) {
     let terminal = tracing_subscriber::fmt::layer()
         .with_ansi(ansi)
         .with_writer(std::io::stderr)
-        .with_filter(parse("warn"));
+        .with_filter(parse(default));
     let folder = tracing_subscriber::fmt::layer()
         .with_ansi(false)
         .with_writer(cli::folder_log::FolderLog)
@@ -163,7 +164,12 @@ fn init_logging(log: Option<&str>) {
 fn main() -> ExitCode {
     keep_freed_memory();
     let cli = Cli::parse();
-    init_logging(cli.log.as_deref());
+    // A flight tells its story on the terminal as the GCS is told it; elsewhere, warnings.
+    let default = match &cli.command {
+        Command::Run(_) => "warn,infotrack=info,infotrack_link=info",
+        _ => "warn",
+    };
+    init_logging(cli.log.as_deref(), default);
     let result = match cli.command {
         Command::Sim(a) => sim(a),
         Command::Run(a) => runtime().and_then(|rt| run_cmd::run(a, rt)),

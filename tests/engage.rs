@@ -162,6 +162,22 @@ async fn pilot_hands_over_and_takes_back(flavor: Flavor) {
     assert_eq!(count("engaged by the pilot"), 2, "{texts:?}");
     assert_eq!(count("released"), 2, "{texts:?}");
     assert_eq!(count("stopped (signal); pilot has it"), 1, "{texts:?}");
+    // The terminal tells the GCS's story, in the same order, and calls the pilot's
+    // hand-over what it is.
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let mut rest: &str = &stderr;
+    for t in &texts {
+        let at = rest.find(t.as_str()).unwrap_or_else(|| {
+            panic!("`{t}` is not on the terminal after the texts before it:\n{stderr}")
+        });
+        rest = &rest[at + t.len()..];
+    }
+    assert!(!stderr.contains("failsafe?"), "{stderr}");
+    assert!(
+        stderr.contains("waiting for the vehicle at") && stderr.contains("vehicle ready"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("the hand-over to infotrack"), "{stderr}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

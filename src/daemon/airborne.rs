@@ -41,13 +41,8 @@ pub(super) async fn connect(
     lc.vehicle = d.vehicle_id.map(|[s, c]| (s, c));
     lc.signing_key = d.signing_key.as_deref().map(SigningKey::load).transpose()?;
     let link = VehicleLink::connect(lc).await?;
-    let flavor = tokio::select! {
-        f = link.wait_vehicle(Duration::from_secs_f64(d.connect_timeout_s)) => f?,
-        _ = &mut *signal => {
-            return Err(DaemonError::Interrupted("while waiting for the vehicle; nothing was commanded"))
-        }
-    };
-    tracing::info!("vehicle: {flavor} on {url}");
+    let flavor = wait_for_vehicle(&link, &url, d.connect_timeout_s, signal).await?;
+    tracing::info!("vehicle ready: {flavor} on {url}");
     vehicle_speed::warn_if_slower_than_planned(cfg, &link, flavor).await;
     Ok(Vehicle {
         link,
@@ -200,18 +195,44 @@ pub(super) async fn launch(cfg: &Config, link: &VehicleLink) -> Result<(), LinkE
     }
 }
 
+/// Waits for the vehicle's heartbeat, up to `timeout_s`, saying so every 5 s.
+async fn wait_for_vehicle(
+    link: &VehicleLink,
+    url: &str,
+    timeout_s: f64,
+    signal: &mut ShutdownSignal,
+) -> Result<Flavor, DaemonError> {
+    tracing::info!("waiting for the vehicle at {url} (up to {timeout_s:.0} s)");
+    let started = tokio::time::Instant::now();
+    let wait = link.wait_vehicle(Duration::from_secs_f64(timeout_s));
+    tokio::pin!(wait);
+    let mut every =
+        tokio::time::interval_at(started + Duration::from_secs(5), Duration::from_secs(5));
+    loop {
+        tokio::select! {
+            f = &mut wait => return Ok(f?),
+            _ = every.tick() => tracing::info!(
+                "still waiting for the vehicle at {url} ({:.0} s)",
+                started.elapsed().as_secs_f64()
+            ),
+            _ = &mut *signal => {
+                return Err(DaemonError::Interrupted("while waiting for the vehicle; nothing was commanded"))
+            }
+        }
+    }
+}
+
 /// `daemon.engage = "pilot"`: waits, as long as it takes, until the pilot has the vehicle
 /// armed and off the ground. Nothing is commanded.
 async fn wait_for_pilot_takeoff(link: &VehicleLink) -> Result<(), LinkError> {
     /// Above this height over the origin a vehicle that reports no landed state is airborne.
     const AIRBORNE_M: f64 = 0.5;
-    tracing::warn!("daemon.engage = pilot: waiting for the pilot to take off");
-    let _ = link
-        .send_statustext(
-            mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_INFO,
-            "infotrack: ready; waiting for the pilot's takeoff",
-        )
-        .await;
+    supervisor::tell(
+        link,
+        mavlink::dialects::ardupilotmega::MavSeverity::MAV_SEVERITY_INFO,
+        "infotrack: ready; waiting for the pilot's takeoff",
+    )
+    .await;
     loop {
         let s = link.state();
         let in_air = match s.landed {
@@ -223,7 +244,7 @@ async fn wait_for_pilot_takeoff(link: &VehicleLink) -> Result<(), LinkError> {
                 .is_some_and(|(_, p, _)| -p.z_down_m > AIRBORNE_M),
         };
         if s.armed && in_air {
-            tracing::warn!(
+            tracing::info!(
                 "the pilot has the vehicle in the air; infotrack takes over when the mode is switched to {}",
                 Mode::companion_for(link.flavor())
             );

@@ -331,36 +331,70 @@ impl Supervisor<'_> {
 
     /// One STATUSTEXT to the ground station (and the log).
     async fn tell_gcs(&self, severity: mavlink::dialects::ardupilotmega::MavSeverity, text: &str) {
-        tracing::info!("{text}");
-        if let Err(e) = self.vehicle.link.send_statustext(severity, text).await {
-            tracing::debug!("STATUSTEXT `{text}`: {e}");
-        }
+        tell(&self.vehicle.link, severity, text).await;
     }
 
-    /// The status line, once a second, when asked for.
+    /// The status line, once a second, when asked for: engagement, the target's state,
+    /// the distance to the estimate and its spread, altitude, mode and the link.
     fn print_status(&mut self) {
         if !self.opts.status_line || self.last_status.elapsed() < Duration::from_secs(1) {
             return;
         }
         self.last_status = Instant::now();
-        let st = self.shared.pipeline_view().status;
-        let mode = self
-            .vehicle
-            .link
-            .state()
+        let Some(s) = self.shared.pipeline_view().status else {
+            return;
+        };
+        let link = &self.vehicle.link;
+        let vehicle = link.state();
+        let mode = vehicle
             .mode
-            .map(|m| format!("{m:?}"))
-            .unwrap_or_else(|| "?".into());
-        if let Some(s) = st {
-            eprintln!(
-                "t={:5.1}s mode={mode} target={} N_eff={:6.1} H={:6.2} state={}",
-                s.t_s,
-                if s.seen { "seen" } else { "unseen" },
-                s.n_eff,
-                s.entropy,
-                s.state.as_str()
-            );
+            .map_or_else(|| "?".into(), |m| format!("{m:?}"));
+        // The link's own watchdog declares the vehicle lost after 3 s without a heartbeat.
+        let link_state = match vehicle.last_heartbeat.map(|t| t.elapsed().as_secs_f64()) {
+            Some(quiet_s) if quiet_s <= 3.0 => "ok".to_string(),
+            Some(quiet_s) => format!("LOST ({quiet_s:.0} s without a heartbeat)"),
+            None => "no heartbeat yet".to_string(),
+        };
+        let (distance, altitude) = link.position_enu().map_or((f64::NAN, f64::NAN), |p| {
+            let d = (s.estimate_enu[0] - p.x_east_m).hypot(s.estimate_enu[1] - p.y_north_m);
+            (d, p.z_up_m)
+        });
+        let engaged = if self.engagement.engaged() {
+            "engaged"
+        } else {
+            "standby"
+        };
+        eprintln!(
+            "t={:5.1}s {engaged} target={} ({}) estimate {distance:.0} m away, +-{:.0} m | alt {altitude:.1} m | mode {mode} | link {link_state}",
+            s.t_s,
+            s.state.as_str(),
+            if s.seen { "in view" } else { "not in view" },
+            s.radius_m,
+        );
+    }
+}
+
+/// One STATUSTEXT to the ground station, and the same words in the log (at `info`, or
+/// `warn` and above as the STATUSTEXT's severity says): the terminal tells what the GCS is
+/// told.
+pub(super) async fn tell(
+    link: &VehicleLink,
+    severity: mavlink::dialects::ardupilotmega::MavSeverity,
+    text: &str,
+) {
+    use mavlink::dialects::ardupilotmega::MavSeverity as S;
+    match severity {
+        S::MAV_SEVERITY_EMERGENCY
+        | S::MAV_SEVERITY_ALERT
+        | S::MAV_SEVERITY_CRITICAL
+        | S::MAV_SEVERITY_ERROR => {
+            tracing::error!("{text}")
         }
+        S::MAV_SEVERITY_WARNING => tracing::warn!("{text}"),
+        _ => tracing::info!("{text}"),
+    }
+    if let Err(e) = link.send_statustext(severity, text).await {
+        tracing::debug!("STATUSTEXT `{text}`: {e}");
     }
 }
 
@@ -398,9 +432,7 @@ pub(super) async fn stop(
         Some(gcs_report::GcsReporter::stopped_released(why))
     };
     if let Some((severity, text)) = said {
-        if let Err(e) = link.send_statustext(severity, &text).await {
-            tracing::debug!("STATUSTEXT `{text}`: {e}");
-        }
+        tell(link, severity, &text).await;
     }
     let output = match joined {
         Ok(Ok(output)) => output,

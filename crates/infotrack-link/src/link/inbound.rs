@@ -387,6 +387,23 @@ fn on_origin(
 /// with another mode every frame must neither flood the log nor grow memory without end.
 const MAX_LISTED: usize = 64;
 
+/// A mode change of an armed vehicle that the link did not ask for, said for what it most
+/// likely is: a switch to the companion's mode is the pilot's (or a GCS's) hand-over, one
+/// to return or land what a failsafe does (or the pilot), anything else the pilot's.
+fn note_armed_mode_change(old: Mode, mode: Mode, n: u64) {
+    match mode {
+        Mode::Offboard | Mode::Guided => tracing::info!(
+            "vehicle switched {old:?} -> {mode:?} by the pilot or a GCS: the hand-over to infotrack ({n} mode change(s) not commanded so far)"
+        ),
+        Mode::ReturnToLaunch | Mode::Land => tracing::warn!(
+            "vehicle switched {old:?} -> {mode:?}, not commanded by infotrack: a failsafe or the pilot ({n} so far)"
+        ),
+        _ => tracing::info!(
+            "vehicle switched {old:?} -> {mode:?} by the pilot or a GCS ({n} mode change(s) not commanded so far)"
+        ),
+    }
+}
+
 /// A mode change the link did not ask for: listed (up to [`MAX_LISTED`]) and logged at
 /// powers of two.
 fn note_own_mode_change(s: &mut VehicleState, old: Mode, mode: Mode) {
@@ -405,7 +422,7 @@ fn note_own_mode_change(s: &mut VehicleState, old: Mode, mode: Mode) {
     }
     let n = s.own_mode_changes;
     if armed {
-        tracing::warn!("vehicle changed mode {old:?} -> {mode:?} by itself (failsafe?; {n} such change(s) so far)");
+        note_armed_mode_change(old, mode, n);
     } else {
         tracing::info!(
             "vehicle changed mode {old:?} -> {mode:?} by itself before arming (its start-up, or the pilot on the ground; {n} so far)"
