@@ -26,12 +26,17 @@ fn pilot_config(dir: &Path) -> PathBuf {
 
 /// `infotrack run` on `cfg` against the mock at `port`, until SIGTERM (`--duration 0`).
 fn run_until_stopped(cfg: &Path, port: u16, out: Option<&Path>) -> tokio::process::Child {
+    run_for(cfg, port, out, "0")
+}
+
+/// `infotrack run` on `cfg` against the mock at `port` with `--duration duration_s`.
+fn run_for(cfg: &Path, port: u16, out: Option<&Path>, duration_s: &str) -> tokio::process::Child {
     let mut c = tokio::process::Command::new(env!("CARGO_BIN_EXE_infotrack"));
     c.args([
         "run",
         "--quiet",
         "--duration",
-        "0",
+        duration_s,
         "--motion",
         "cv",
         "--config",
@@ -64,6 +69,21 @@ async fn switch(mock: &MockHandle, mode: Mode) {
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     panic!("the switch to {mode:?} was refused: {last:?}");
+}
+
+/// The values of `column` in a CSV record file (a `#` preamble line is skipped).
+fn csv_column(path: &Path, column: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let at = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == column)
+        .unwrap();
+    lines
+        .map(|l| l.split(',').nth(at).unwrap().to_string())
+        .collect()
 }
 
 fn horizontal(mock: &MockHandle) -> [f64; 2] {
@@ -218,5 +238,68 @@ async fn engaged_at_the_stop_it_holds_and_the_in_process_mock_is_refused() {
     assert!(
         err.contains("daemon.engage = \"pilot\" needs a vehicle with a pilot"),
         "{err}"
+    );
+}
+
+/// `--duration` is the time infotrack has the vehicle for: a flight the pilot has not handed
+/// over does not end by it, one handed over ends that long after the switch, and the
+/// metrics are those of the engaged steps only.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_duration_and_the_metrics_count_from_the_pilots_hand_over() {
+    let (mock, port) = udp_mock(MockConfig::new(Flavor::Px4)).await;
+    let dir = tempfile::tempdir().unwrap();
+    let flight = dir.path().join("flight");
+    let mut child = run_for(&pilot_config(dir.path()), port, Some(&flight), "4");
+    mock.with(|m| m.pilot_take_off(1.2));
+    assert!(eventually(15.0, || mock.with(|m| -m.position_ned_m()[2] > 1.0)).await);
+    tokio::time::sleep(Duration::from_secs(6)).await;
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "ended before the hand-over"
+    );
+    switch(&mock, Mode::Offboard).await;
+    let switched = std::time::Instant::now();
+    let out = tokio::time::timeout(Duration::from_secs(20), child.wait_with_output())
+        .await
+        .expect("no end 20 s after the hand-over")
+        .unwrap();
+    let engaged_s = switched.elapsed().as_secs_f64();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        (3.5..10.0).contains(&engaged_s),
+        "ended {engaged_s:.1} s after the switch"
+    );
+
+    // The summary's tracking error is the mean over the steps from the hand-over on.
+    let modes = csv_column(&flight.join("flight.csv"), "vehicle_mode");
+    let errors: Vec<f64> = csv_column(&flight.join("steps.csv"), "tracking_error_m")
+        .iter()
+        .map(|e| e.parse().unwrap())
+        .collect();
+    assert_eq!(modes.len(), errors.len());
+    let first_engaged = modes
+        .iter()
+        .position(|m| m == "Offboard")
+        .expect("no engaged step");
+    assert!(first_engaged > 6, "{first_engaged} standby steps");
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(flight.join("summary.json")).unwrap())
+            .unwrap();
+    let reported = summary["tracking_error_m"].as_f64().unwrap();
+    // The supervisor's moment of hand-over falls within a step of the first engaged record.
+    let near = (first_engaged.saturating_sub(2)..=first_engaged + 2)
+        .any(|k| (mean(&errors[k..]) - reported).abs() < 1e-4);
+    assert!(
+        near,
+        "summary {reported} is not the mean from the hand-over on"
+    );
+    assert!(
+        (mean(&errors) - reported).abs() > 1e-3,
+        "the standby steps were counted"
     );
 }

@@ -20,8 +20,9 @@ pub struct RunArgs {
     /// synthetic camera, in-process mock PX4).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Seconds of tracking after takeoff (default: the config's timing.duration_s); 0: until
-    /// SIGINT/SIGTERM.
+    /// Seconds infotrack has the vehicle for, from its own take-off's end or from the
+    /// pilot's hand-over (default: the config's timing.duration_s); the metrics count from
+    /// there too; 0: until SIGINT/SIGTERM.
     #[arg(long, value_parser = super::numbers::seconds)]
     duration: Option<f64>,
     /// Folder for the logs (per-step CSV, MAVLink .tlog, plots, summary JSON), written as

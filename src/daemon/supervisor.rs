@@ -8,6 +8,9 @@ pub(super) struct Tracked {
     stopped_by: StopReason,
     /// Whether infotrack had the vehicle at the end (then it holds it; else the pilot has it).
     engaged: bool,
+    /// Seconds from the start of tracking to the first engagement (`None`: never engaged):
+    /// the metrics count from there.
+    engaged_after_s: Option<f64>,
     link_losses: u32,
     geofence_refusals: u64,
     ticker: tokio::task::JoinHandle<()>,
@@ -29,6 +32,8 @@ struct Supervisor<'a> {
     engagement: engagement::Engagement,
     /// The setpoint stream is paused (link lost, or released on ArduPilot).
     paused: bool,
+    /// When infotrack first had the vehicle: `--duration` counts from there.
+    engaged_at: Option<Instant>,
 }
 
 /// Phase 4: steps the pipeline on the runtime's clock and, every 20 ms, feeds it the
@@ -67,7 +72,10 @@ pub(super) async fn track(
         gcs: gcs_report::GcsReporter::new(&cfg.daemon.target_lost_fallback),
         engagement: engagement::Engagement::new(cfg.daemon.engage, vehicle.flavor),
         paused: false,
+        engaged_at: None,
     };
+    // `auto` has the vehicle from the start of tracking (it took off itself).
+    sup.engaged_at = sup.engagement.engaged().then_some(began);
     let (severity, text) = gcs_report::GcsReporter::started(&opts.motion);
     sup.tell_gcs(severity, &text).await;
     let stopped_by = loop {
@@ -75,12 +83,15 @@ pub(super) async fn track(
             _ = &mut *signal => break StopReason::Signal,
             _ = tick.tick() => {}
         }
-        if let Some(why) = sup.reason_to_stop(began, pipeline, &ticker).await {
+        if let Some(why) = sup.reason_to_stop(pipeline, &ticker).await {
             break why;
         }
         sup.switch_faults(began.elapsed().as_secs_f64());
         let snap = sup.feed_vehicle_state();
         sup.follow_pilot().await;
+        if sup.engaged_at.is_none() && sup.engagement.engaged() {
+            sup.engaged_at = Some(Instant::now());
+        }
         sup.apply_command(snap);
         sup.print_status();
         sup.report_to_gcs().await;
@@ -90,6 +101,9 @@ pub(super) async fn track(
         engaged: sup.engagement.holds_at_stop()
             && (cfg.daemon.engage == Engage::Auto
                 || vehicle.link.state().mode == Some(Mode::companion_for(vehicle.flavor))),
+        engaged_after_s: sup
+            .engaged_at
+            .map(|t| t.duration_since(began).as_secs_f64()),
         link_losses: sup.link_losses,
         geofence_refusals: sup.geofence_refusals,
         ticker,
@@ -97,16 +111,19 @@ pub(super) async fn track(
 }
 
 impl Supervisor<'_> {
-    /// Why tracking must stop now, if it must: the duration is up, the target's recorded
+    /// Why tracking must stop now, if it must: infotrack has had the vehicle for the
+    /// duration, the target's recorded
     /// track has ended, the pipeline died (a panic: nothing decides any more), or the
     /// vehicle's origin moved (the world and its geofence would move with it).
     async fn reason_to_stop(
         &mut self,
-        began: Instant,
         pipeline: &PipelineHandle,
         ticker: &tokio::task::JoinHandle<()>,
     ) -> Option<StopReason> {
-        if began.elapsed().as_secs_f64() >= self.opts.duration_s {
+        // `--duration` is the time infotrack has had the vehicle for: from the pilot's
+        // hand-over, or from the start of tracking after its own take-off.
+        let engaged_for_s = self.engaged_at.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        if engaged_for_s >= self.opts.duration_s {
             return Some(StopReason::Duration);
         }
         if self.shared.target_ended.load(Ordering::Relaxed) {
@@ -445,7 +462,14 @@ pub(super) async fn stop(
     };
     let state = link.state();
     link.flush_tlog();
-    let steps: Vec<_> = output.records.iter().map(|r| r.step.clone()).collect();
+    // The metrics are those of the time infotrack had the vehicle (none if it never did).
+    let from_s = tracked.engaged_after_s.unwrap_or(f64::INFINITY);
+    let steps: Vec<_> = output
+        .records
+        .iter()
+        .filter(|r| r.step.t_s >= from_s)
+        .map(|r| r.step.clone())
+        .collect();
     let summary = RunSummary::from_steps(&steps, &output.filter_ms, &output.guidance_ms);
     Ok(DaemonReport {
         summary,
