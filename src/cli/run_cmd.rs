@@ -65,9 +65,17 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
     let s = &r.summary;
     let o = &r.output;
     let mut t = String::new();
+    // A simulated target (the synthetic camera) makes it a closed loop with truth; a real
+    // camera's flight has none, and its heading says so.
+    let truth = o.records.iter().any(|r| r.step.tracking_error_m().is_finite());
+    let kind = if !truth && !o.records.is_empty() {
+        "flight (real camera, no ground truth)"
+    } else {
+        "closed loop"
+    };
     let _ = writeln!(
         t,
-        "closed loop | {} vehicle at {} | motion {motion} | {} filter steps | stopped by {:?}",
+        "{kind} | {} vehicle at {} | motion {motion} | {} filter steps | stopped by {:?}",
         r.flavor,
         r.vehicle,
         o.records.len(),
