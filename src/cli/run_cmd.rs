@@ -67,7 +67,10 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
     let mut t = String::new();
     // A simulated target (the synthetic camera) makes it a closed loop with truth; a real
     // camera's flight has none, and its heading says so.
-    let truth = o.records.iter().any(|r| r.step.tracking_error_m().is_finite());
+    let truth = o
+        .records
+        .iter()
+        .any(|r| r.step.tracking_error_m().is_finite());
     let kind = if !truth && !o.records.is_empty() {
         "flight (real camera, no ground truth)"
     } else {

@@ -64,20 +64,7 @@ fn draw_scene(
         .y_desc("y north (m)")
         .draw()
         .map_err(|e| plot_err(path, e))?;
-    for occ in &world.occlusions {
-        let pts: Vec<(f64, f64)> = occ.vertices().iter().map(|v| (v.x, v.y)).collect();
-        chart
-            .draw_series(std::iter::once(Polygon::new(pts, BLACK.mix(0.25).filled())))
-            .map_err(|e| plot_err(path, e))?;
-    }
-    for (a, b) in world.road.edges_enu() {
-        chart
-            .draw_series(LineSeries::new(
-                [(a.x, a.y), (b.x, b.y)],
-                BLACK.mix(0.5).stroke_width(2),
-            ))
-            .map_err(|e| plot_err(path, e))?;
-    }
+    draw_world(&mut chart, world).map_err(|e| plot_err(path, e))?;
     for (k, snap) in snapshots.iter().enumerate() {
         let colour = SNAPSHOT_COLOURS[k % SNAPSHOT_COLOURS.len()];
         chart
@@ -107,6 +94,17 @@ fn draw_scene(
         .map_err(|e| plot_err(path, e))?
         .label("agent")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(1)));
+    let estimate = RGBColor(0, 160, 160);
+    chart
+        .draw_series(LineSeries::new(
+            steps.iter().map(|s| (s.estimate_enu.x, s.estimate_enu.y)),
+            estimate.stroke_width(1),
+        ))
+        .map_err(|e| plot_err(path, e))?
+        .label("estimate")
+        .legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 20, y)], estimate.stroke_width(1))
+        });
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
@@ -115,6 +113,42 @@ fn draw_scene(
         .draw()
         .map_err(|e| plot_err(path, e))?;
     root.present().map_err(|e| plot_err(path, e))
+}
+
+type SceneChart<'a> = ChartContext<
+    'a,
+    BitMapBackend<'a>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// Occlusions (grey areas) and roads (dark lines), each with one legend entry.
+fn draw_world(chart: &mut SceneChart<'_>, world: &World) -> Result<(), String> {
+    let occlusion = BLACK.mix(0.25);
+    let polygons = world.occlusions.iter().map(|occ| {
+        let pts: Vec<(f64, f64)> = occ.vertices().iter().map(|v| (v.x, v.y)).collect();
+        Polygon::new(pts, occlusion.filled())
+    });
+    let drawn = chart.draw_series(polygons).map_err(|e| e.to_string())?;
+    if !world.occlusions.is_empty() {
+        drawn.label("occlusion").legend(move |(x, y)| {
+            Rectangle::new([(x, y - 5), (x + 20, y + 5)], occlusion.filled())
+        });
+    }
+    let road = BLACK.mix(0.5);
+    let edges = world.road.edges_enu();
+    let drawn = chart
+        .draw_series(
+            edges
+                .iter()
+                .map(|(a, b)| PathElement::new(vec![(a.x, a.y), (b.x, b.y)], road.stroke_width(2))),
+        )
+        .map_err(|e| e.to_string())?;
+    if !edges.is_empty() {
+        drawn.label("road").legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 20, y)], road.stroke_width(2))
+        });
+    }
+    Ok(())
 }
 
 /// Estimation error over time; red spans: target occluded; grey spans: target outside the
@@ -198,7 +232,15 @@ fn draw_metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), Repor
     ensure_parent(path)?;
     let root = BitMapBackend::new(path, (1200, 800)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
-    let panels = root.split_evenly((2, 2));
+    let runs = result.results.first().map_or(0, |c| c.runs);
+    let what = format!(
+        "{}: bars are the mean over n = {runs} runs per law (the same seeds), whiskers +-1 sd; seed {}, {:.0} s runs",
+        result.scenario, result.seed, result.duration_s
+    );
+    let body = root
+        .titled(&what, ("sans-serif", 18))
+        .map_err(|e| plot_err(path, e))?;
+    let panels = body.split_evenly((2, 2));
     let names: Vec<String> = result
         .results
         .iter()
@@ -209,7 +251,7 @@ fn draw_metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), Repor
         ("tracking error (m)", |c| c.tracking_error_m),
         ("estimation error (m)", |c| c.estimation_error_m),
         ("det of covariance (m^4)", |c| c.cov_det),
-        ("%FOV", |c| c.fov_percent),
+        ("target in view, %FOV (% of steps)", |c| c.fov_percent),
     ];
     for (panel, (label, get)) in panels.iter().zip(metrics) {
         let vals: Vec<MeanSd> = result.results.iter().map(get).collect();
@@ -223,15 +265,17 @@ fn draw_metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), Repor
         let n = vals.len().max(1) as f64;
         let names_ref = &names;
         let mut chart = ChartBuilder::on(panel)
-            .caption(label, ("sans-serif", 18))
+            .caption(label, ("sans-serif", 17))
             .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
             .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
             .map_err(|e| plot_err(path, e))?;
         chart
             .configure_mesh()
             .disable_x_mesh()
+            .x_desc("guidance law / motion model")
+            .y_desc(label)
             .x_labels(vals.len().max(1))
             .x_label_formatter(&|x| {
                 let i = x.round();
