@@ -126,6 +126,25 @@ fn a_generated_network_gives_a_world_and_tracks_the_simulator_flies() {
         runs.iter().all(|r| r["first_sighting_s"].is_number()),
         "{truth}"
     );
+    // Each run is named by what reproduces it: index, seed and track (run i, track i mod n).
+    for (i, r) in runs.iter().enumerate() {
+        assert_eq!(r["run"].as_u64(), Some(i as u64), "{r}");
+        assert!(r["seed"].is_u64() && r["seed"] == results["seed"], "{r}");
+        let track = r["track"].as_str().unwrap();
+        assert!(
+            track.ends_with(tracks[i % 2]["file"].as_str().unwrap()),
+            "{track}"
+        );
+    }
+    let version = results["infotrack"]["version"].as_str().unwrap();
+    assert_eq!(version, env!("CARGO_PKG_VERSION"));
+    assert!(results["infotrack"]["commit"]
+        .as_str()
+        .is_some_and(|c| !c.is_empty()));
+    assert!(results["config"]
+        .as_str()
+        .unwrap()
+        .ends_with("traffic.toml"));
 }
 
 /// On a real town's streets (the Helsinki extract), SUMO's car stops at lights and behind

@@ -157,14 +157,52 @@ pub fn sim(a: SimArgs) -> Result<()> {
     let result = mc.run(&cfg)?;
     print!("{}", report::table::render(&result));
     print_vision(&result);
+    let json = results_json(&result, &cfg, a.config.as_deref())?;
     if let Some(p) = &a.json {
-        report::write_json(p, &result)?;
+        report::write_json(p, &json)?;
         println!("wrote {}", p.display());
     }
     if let Some(dir) = &a.out {
-        write_outputs(dir, &cfg, &result)?;
+        write_outputs(dir, &cfg, &result, &json)?;
     }
     Ok(())
+}
+
+/// The results as JSON, each run named by what reproduces it: its index and seed (its random
+/// streams are the seed's run-index streams) and, with recorded targets, its track; and the
+/// whole by the program's version and commit and the config it ran.
+fn results_json(
+    result: &infotrack::sim::MonteCarloResult,
+    cfg: &infotrack::config::Config,
+    source: Option<&std::path::Path>,
+) -> Result<serde_json::Value> {
+    let mut v = serde_json::to_value(result).context("the results as JSON")?;
+    let tracks: Vec<String> = cfg
+        .target
+        .trajectory
+        .as_ref()
+        .map(|t| t.files().iter().map(|f| f.display().to_string()).collect())
+        .unwrap_or_default();
+    for combo in v["results"].as_array_mut().into_iter().flatten() {
+        for (i, run) in combo["per_run"]
+            .as_array_mut()
+            .into_iter()
+            .flatten()
+            .enumerate()
+        {
+            run["run"] = i.into();
+            run["seed"] = result.seed.into();
+            if !tracks.is_empty() {
+                run["track"] = tracks[i % tracks.len()].clone().into();
+            }
+        }
+    }
+    v["infotrack"] = serde_json::json!({
+        "version": env!("CARGO_PKG_VERSION"),
+        "commit": env!("INFOTRACK_COMMIT"),
+    });
+    v["config"] = super::flight_folder::source_name(source).into();
+    Ok(v)
 }
 
 /// Per law and model, how often the detector found the tag in the rendered frames.
@@ -189,6 +227,7 @@ fn write_outputs(
     dir: &std::path::Path,
     cfg: &infotrack::config::Config,
     result: &infotrack::sim::MonteCarloResult,
+    json: &serde_json::Value,
 ) -> Result<()> {
     let world = cfg.world();
     for ((g, m), outs) in &result.outputs {
@@ -212,7 +251,7 @@ fn write_outputs(
         }
     }
     report::plots::metrics_bars(&dir.join("metrics.png"), result)?;
-    report::write_json(&dir.join("results.json"), result)?;
+    report::write_json(&dir.join("results.json"), json)?;
     println!(
         "wrote per-step CSV logs, plots (metrics.png, */scene_run000.png, */estimation_error_run000.png) and results.json to {}",
         dir.display()
