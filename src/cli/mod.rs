@@ -14,6 +14,7 @@ pub mod folder_log;
 pub mod mock_cmd;
 pub mod numbers;
 pub mod params_cmd;
+pub mod report_cmd;
 pub mod run_cmd;
 pub mod sim_cmd;
 pub mod world_cmd;

@@ -250,7 +250,9 @@ fn write_outputs(
             )?;
         }
     }
-    report::plots::metrics_bars(&dir.join("metrics.png"), result)?;
+    let figure =
+        report::bars::MetricsFigure::from_results_json(json).map_err(anyhow::Error::msg)?;
+    report::bars::draw(&dir.join("metrics.png"), &figure)?;
     report::write_json(&dir.join("results.json"), json)?;
     println!(
         "wrote per-step CSV logs, plots (metrics.png, */scene_run000.png, */estimation_error_run000.png) and results.json to {}",

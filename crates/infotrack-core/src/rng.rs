@@ -21,6 +21,8 @@ pub enum Stream {
     Guidance = 4,
     /// Data-set recording and other tools.
     Tools = 5,
+    /// Resampling for the statistics that compare methods (bootstrap intervals).
+    Statistics = 6,
 }
 
 /// A generator for `stream` of run `run` under user seed `seed`, salted by `method`

@@ -1,5 +1,6 @@
 //! The paper's four metrics, per step and per run, and the statistics that compare methods.
 
+pub mod bootstrap;
 pub mod csv;
 pub mod paired;
 pub mod stats;

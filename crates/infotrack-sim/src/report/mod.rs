@@ -1,6 +1,8 @@
 //! Output of the benchmark: the console table, the JSON summary, per-step CSV logs and plots.
 
+pub mod bars;
 pub mod csv;
+pub mod markdown;
 pub mod plots;
 pub mod table;
 

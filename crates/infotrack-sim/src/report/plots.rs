@@ -1,6 +1,5 @@
-//! PNG plots: the scene of a run, the metrics bar chart of all methods (like the paper's
-//! bar figure), and estimation error over time with occluded and out-of-view spans shaded
-//! (like the paper's per-run figure).
+//! PNG plots of one run: the scene, and the estimation error over time with occluded and
+//! out-of-view spans shaded (like the paper's per-run figure).
 
 use std::path::Path;
 
@@ -8,8 +7,7 @@ use plotters::prelude::*;
 
 use super::ReportError;
 use crate::sim::run::Snapshot;
-use crate::sim::MonteCarloResult;
-use infotrack_core::metrics::{MeanSd, StepRecord};
+use infotrack_core::metrics::StepRecord;
 use infotrack_core::world::World;
 
 fn plot_err(path: &Path, e: impl std::fmt::Display) -> ReportError {
@@ -227,93 +225,6 @@ fn draw_estimation_error(
     root.present().map_err(|e| plot_err(path, e))
 }
 
-/// One bar chart per metric, one bar (mean, with a +-sd whisker) per method.
-fn draw_metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), ReportError> {
-    ensure_parent(path)?;
-    let root = BitMapBackend::new(path, (1200, 800)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| plot_err(path, e))?;
-    let runs = result.results.first().map_or(0, |c| c.runs);
-    let what = format!(
-        "{}: bars are the mean over n = {runs} runs per law (the same seeds), whiskers +-1 sd; seed {}, {:.0} s runs",
-        result.scenario, result.seed, result.duration_s
-    );
-    let body = root
-        .titled(&what, ("sans-serif", 18))
-        .map_err(|e| plot_err(path, e))?;
-    let panels = body.split_evenly((2, 2));
-    let names: Vec<String> = result
-        .results
-        .iter()
-        .map(|c| format!("{}/{}", c.guidance, c.motion))
-        .collect();
-    type Getter = fn(&crate::sim::monte_carlo::ComboResult) -> MeanSd;
-    let metrics: [(&str, Getter); 4] = [
-        ("tracking error (m)", |c| c.tracking_error_m),
-        ("estimation error (m)", |c| c.estimation_error_m),
-        ("det of covariance (m^4)", |c| c.cov_det),
-        ("target in view, %FOV (% of steps)", |c| c.fov_percent),
-    ];
-    for (panel, (label, get)) in panels.iter().zip(metrics) {
-        let vals: Vec<MeanSd> = result.results.iter().map(get).collect();
-        let top = vals
-            .iter()
-            .map(|v| v.mean + if v.sd.is_finite() { v.sd } else { 0.0 })
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::max)
-            .max(1e-9)
-            * 1.15;
-        let n = vals.len().max(1) as f64;
-        let names_ref = &names;
-        let mut chart = ChartBuilder::on(panel)
-            .caption(label, ("sans-serif", 17))
-            .margin(10)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
-            .map_err(|e| plot_err(path, e))?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_desc("guidance law / motion model")
-            .y_desc(label)
-            .x_labels(vals.len().max(1))
-            .x_label_formatter(&|x| {
-                let i = x.round();
-                if (x - i).abs() < 1e-6 && i >= 0.0 {
-                    names_ref.get(i as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
-            .draw()
-            .map_err(|e| plot_err(path, e))?;
-        chart
-            .draw_series(vals.iter().enumerate().map(|(i, v)| {
-                let x = i as f64;
-                Rectangle::new(
-                    [(x - 0.3, 0.0), (x + 0.3, v.mean.max(0.0))],
-                    BLUE.mix(0.6).filled(),
-                )
-            }))
-            .map_err(|e| plot_err(path, e))?;
-        chart
-            .draw_series(
-                vals.iter()
-                    .enumerate()
-                    .filter(|(_, v)| v.sd.is_finite())
-                    .map(|(i, v)| {
-                        let x = i as f64;
-                        PathElement::new(
-                            vec![(x, (v.mean - v.sd).max(0.0)), (x, v.mean + v.sd)],
-                            BLACK.stroke_width(2),
-                        )
-                    }),
-            )
-            .map_err(|e| plot_err(path, e))?;
-    }
-    root.present().map_err(|e| plot_err(path, e))
-}
-
 /// The scene: workspace, roads, occlusions, target and agent tracks, particles at a few
 /// instants; written whole or not at all.
 pub fn scene(
@@ -329,10 +240,4 @@ pub fn scene(
 /// The estimation error over time; written whole or not at all.
 pub fn estimation_error(path: &Path, title: &str, steps: &[StepRecord]) -> Result<(), ReportError> {
     super::whole_file(path, |tmp| draw_estimation_error(tmp, title, steps))
-}
-
-/// One bar chart per metric, one bar (mean, with a +-sd whisker) per method; written whole
-/// or not at all.
-pub fn metrics_bars(path: &Path, result: &MonteCarloResult) -> Result<(), ReportError> {
-    super::whole_file(path, |tmp| draw_metrics_bars(tmp, result))
 }

@@ -89,6 +89,9 @@ pub struct PairedMetric {
     /// The Wilcoxon p-value after Holm's correction over every law and metric compared with
     /// EER in this campaign.
     pub wilcoxon_p_holm: Option<f64>,
+    /// The 95 % BCa bootstrap interval of the mean difference (seeded by the campaign's
+    /// seed).
+    pub mean_diff_ci95_bootstrap: Option<[f64; 2]>,
 }
 
 /// A per-run metric.
@@ -119,6 +122,9 @@ pub struct ComboResult {
     pub cov_det: MeanSd,
     /// %FOV.
     pub fov_percent: MeanSd,
+    /// Per metric of [`PAIRED_METRICS`], the 95 % BCa bootstrap interval of its mean over
+    /// the runs (seeded by the campaign's seed); absent for fewer than two runs.
+    pub ci95_bootstrap: BTreeMap<String, [f64; 2]>,
     /// Median filter step time over all steps of all runs, ms.
     pub filter_step_ms: Median,
     /// Median guidance step time, ms.
@@ -218,8 +224,9 @@ impl MonteCarlo {
             .zip(&by_combo)
             .map(|((g, e), outs)| aggregate(*g, e, outs))
             .collect();
+        add_bootstrap_intervals(&mut results, self.seed);
         add_welch_tests(&mut results);
-        add_paired_tests(&mut results);
+        add_paired_tests(&mut results, self.seed);
         let mut outputs_map = BTreeMap::new();
         if self.keep_outputs {
             for ((g, e), outs) in combos.iter().zip(by_combo) {
@@ -256,6 +263,7 @@ fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput]) -> ComboRes
         estimation_error_m: col(|s| s.estimation_error_m),
         cov_det: col(|s| s.cov_det),
         fov_percent: col(|s| s.fov_percent),
+        ci95_bootstrap: BTreeMap::new(),
         filter_step_ms: Median {
             median: median(&all_filter),
         },
@@ -307,12 +315,36 @@ fn eer_runs_by_motion(results: &[ComboResult]) -> BTreeMap<String, Vec<RunSummar
         .collect()
 }
 
+/// The resampling stream of one interval: the campaign's seed, the combination's place and
+/// the metric's, so that each interval is reproducible and independent of the others.
+fn statistics_rng(seed: u64, combo: usize, salt: usize) -> infotrack_core::rng::CoreRng {
+    use infotrack_core::rng::{stream_rng, Stream};
+    stream_rng(seed, combo as u64, Stream::Statistics, salt as u64)
+}
+
+/// Each combination's bootstrap intervals of its metrics' means over runs.
+fn add_bootstrap_intervals(results: &mut [ComboResult], seed: u64) {
+    use infotrack_core::metrics::bootstrap::{bca_mean_ci95, RESAMPLES};
+    for (c, r) in results.iter_mut().enumerate() {
+        for (k, (metric, f)) in PAIRED_METRICS.iter().enumerate() {
+            let x: Vec<f64> = r.per_run.iter().map(f).collect();
+            if let Some(ci) = bca_mean_ci95(&x, RESAMPLES, &mut statistics_rng(seed, c, k)) {
+                r.ci95_bootstrap.insert(metric.to_string(), ci);
+            }
+        }
+    }
+}
+
 /// Paired tests of EER against every other law with the same estimator (run i of both used
 /// seed i's streams), the Wilcoxon p-values Holm-corrected over all of them.
-fn add_paired_tests(results: &mut [ComboResult]) {
+fn add_paired_tests(results: &mut [ComboResult], seed: u64) {
+    use infotrack_core::metrics::bootstrap::{bca_mean_ci95, RESAMPLES};
     use infotrack_core::metrics::paired::{holm, paired_t_test, wilcoxon_signed_rank};
     let eer_runs = eer_runs_by_motion(results);
-    for r in results.iter_mut().filter(|r| r.guidance != "eer") {
+    for (c, r) in results.iter_mut().enumerate() {
+        if r.guidance == "eer" {
+            continue;
+        }
         let Some(eer) = eer_runs
             .get(&r.motion)
             .filter(|e| e.len() == r.per_run.len())
@@ -321,14 +353,18 @@ fn add_paired_tests(results: &mut [ComboResult]) {
         };
         let metrics = PAIRED_METRICS
             .iter()
-            .map(|(metric, f)| {
+            .enumerate()
+            .map(|(k, (metric, f))| {
                 let a: Vec<f64> = eer.iter().map(f).collect();
                 let b: Vec<f64> = r.per_run.iter().map(f).collect();
+                let d: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x - y).collect();
+                let mut rng = statistics_rng(seed, c, PAIRED_METRICS.len() + k);
                 PairedMetric {
                     metric,
                     t_test: paired_t_test(&a, &b),
                     wilcoxon: wilcoxon_signed_rank(&a, &b),
                     wilcoxon_p_holm: None,
+                    mean_diff_ci95_bootstrap: bca_mean_ci95(&d, RESAMPLES, &mut rng),
                 }
             })
             .collect();
