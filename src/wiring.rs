@@ -164,4 +164,8 @@ impl SyntheticWorld for SimulatedScene {
     fn last_render_ms(&self) -> f64 {
         self.camera.camera.last_render_ms
     }
+
+    fn last_frame(&self) -> Option<crate::vision::image::GrayImage> {
+        self.camera.last_frame()
+    }
 }

@@ -27,6 +27,7 @@ fn opts(duration_s: f64, tlog: Option<std::path::PathBuf>) -> RunOptions {
         motion: "dmmn".into(),
         tlog,
         records_dir: None,
+        visual_record: None,
         status_line: false,
         faults: vec![],
         // The tests fly a separate mock process over a MAVLink URL, as a SITL would be.
@@ -230,6 +231,7 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
         keep_outputs: false,
         progress: false,
         vision: true,
+        trace_first_run: false,
     }
     .run(&cfg)
     .unwrap();
@@ -684,58 +686,15 @@ fn bad_starts_give_clear_errors() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_real_camera_source_is_projected_with_the_pose_at_capture_time() {
     use infotrack::daemon::pipeline::TrackState;
-    use infotrack::render::{render, RenderOptions, SceneEnu, TargetAppearance};
-    use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics, VehiclePoseNed};
-    use infotrack::vision::{cv_io, tag_family::TagBitmap};
-    use opencv::prelude::*;
     // A camera that films a tag at (0.1, 0.15) m ENU from where the vehicle will hover:
     // (0, 0) at the agent's 1.2 m, nose north (the vehicle holds the setpoints' yaw, the
     // heading the footprint model is drawn for: NED 0).
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = lab();
-    let intr = Intrinsics::ideal(640, 480, cfg.camera.fov_x_rad);
-    let calib = dir.path().join("camera.yaml");
-    cv_io::save_calibration(&calib, &intr).unwrap();
-    let cam = CameraModel {
-        intrinsics: intr,
-        mount: CameraMount::nadir(),
-    };
-    let pose = VehiclePoseNed {
-        position_ned_m: [0.0, 0.0, -cfg.agent.altitude_m],
-        roll_rad: 0.0,
-        pitch_rad: 0.0,
-        yaw_rad: 0.0,
-    };
     let tag = [0.1, 0.15];
-    let scene = SceneEnu {
-        target: Some(TargetAppearance {
-            position_enu_m: tag,
-            heading_enu_rad: 0.3,
-            tag: TagBitmap::tag36h11(cfg.vision.tag_id).unwrap(),
-            tag_size_m: cfg.vision.tag_size_m,
-        }),
-        occluders: vec![],
-        ground_seed: 2,
-    };
-    let video = dir.path().join("camera.avi");
-    let mut w = opencv::videoio::VideoWriter::new(
-        &video.display().to_string(),
-        opencv::videoio::VideoWriter::fourcc('F', 'F', 'V', '1').unwrap(),
-        30.0,
-        opencv::core::Size::new(640, 480),
-        false,
-    )
-    .unwrap();
-    for k in 0..120 {
-        let opts = RenderOptions {
-            supersample: 2,
-            noise_sigma: 2.0,
-            ..Default::default()
-        };
-        w.write(&cv_io::mat_from_gray(&render(&cam, &pose, &scene, &opts, k)).unwrap())
-            .unwrap();
-    }
-    w.release().unwrap();
+    let (video, calib) = common::film_a_tag(dir.path(), &cfg, tag);
+    let cam = common::filming_camera(&cfg);
+    let pose = common::filming_pose(&cfg);
     cfg.daemon.camera = video.display().to_string();
     cfg.daemon.calibration = Some(calib);
     // Hover: the vehicle may not wander from where the film was taken.

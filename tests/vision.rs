@@ -381,6 +381,7 @@ fn the_simulator_in_vision_mode_measures_through_rendered_frames() {
         duration_s: 20.0,
         snapshot_times_s: vec![],
         vision: true,
+        trace: false,
     };
     let out = run_once(&cfg, &world, &spec).unwrap();
     let stats = out.vision.unwrap();

@@ -73,6 +73,17 @@ fn mode_changes(v: &[(Mode, Mode)]) -> Value {
         .collect()
 }
 
+/// Each filter step's estimate spread, m: the standard deviation along the covariance's
+/// widest axis (the square root of its largest eigenvalue). What a flight without ground
+/// truth can say of how well it knows where the target is.
+pub fn estimate_spread_m(records: &[infotrack::daemon::flight_log::FlightRecord]) -> Vec<f64> {
+    records
+        .iter()
+        .map(|r| r.step.cov_m2.symmetric_eigenvalues().max().max(0.0).sqrt())
+        .filter(|v| v.is_finite())
+        .collect()
+}
+
 /// Every figure of the end table that the tracking metrics do not hold.
 pub fn figures(r: &DaemonReport, res: &Resources) -> Value {
     let o = &r.output;
@@ -85,6 +96,7 @@ pub fn figures(r: &DaemonReport, res: &Resources) -> Value {
         "frames_with_tag": o.vision.detections,
         "filter_periods_without_frame": o.frames_missed,
         "guidance_overruns": o.guidance_overruns,
+        "estimate_spread_m": quantiles(&estimate_spread_m(&o.records)),
         "frame_to_setpoint_ms": quantiles(&o.latency_ms),
         "detection_ms": quantiles(&o.detect_ms),
         "filter_ms": quantiles(&o.update_ms),

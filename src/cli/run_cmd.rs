@@ -36,6 +36,11 @@ pub struct RunArgs {
     /// Seed (default: the config's `seed`).
     #[arg(long)]
     seed: Option<u64>,
+    /// Write a visual record for Foxglove (MCAP) here as the flight goes: the world, the
+    /// vehicle, the estimate, the measurements, the setpoints, the particles and the
+    /// camera's frames (one a second).
+    #[arg(long)]
+    record: Option<PathBuf>,
     /// Motion model of the particle filter (default: the config's daemon.motion, `dmmn`).
     #[arg(long)]
     motion: Option<String>,
@@ -84,30 +89,11 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
         o.records.len(),
         r.stopped_by
     );
-    let _ = writeln!(
-        t,
-        "| tracking error (m) | estimation error (m) | det(cov) (m^4) | %FOV | frames with tag | guidance overruns | frame->setpoint p50/p99 (ms) |"
-    );
-    let _ = writeln!(t, "|---|---|---|---|---|---|---|");
-    if s.tracking_error_m.is_nan() {
-        let _ = writeln!(
-            t,
-            "(real camera: no ground truth, so no tracking/estimation error or %FOV)"
-        );
+    if truth {
+        truth_rows(&mut t, r);
+    } else {
+        no_truth_rows(&mut t, r);
     }
-    let _ = writeln!(
-        t,
-        "| {:.3} | {:.3} | {:.2e} | {:.1} | {}/{} | {} | {:.1} / {:.1} |",
-        s.tracking_error_m,
-        s.estimation_error_m,
-        s.cov_det,
-        s.fov_percent,
-        o.vision.detections,
-        o.vision.frames,
-        o.guidance_overruns,
-        percentile(&o.latency_ms, 0.5),
-        percentile(&o.latency_ms, 0.99)
-    );
     let pp = |v: &[f64]| format!("{:.1}/{:.1}", percentile(v, 0.5), percentile(v, 0.99));
     let _ = writeln!(
         t,
@@ -146,6 +132,57 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
         r.link_losses, r.geofence_refusals, o.frames_missed
     );
     t
+}
+
+/// The metrics row of a flight with ground truth (a simulated target).
+fn truth_rows(t: &mut String, r: &DaemonReport) {
+    let (s, o) = (&r.summary, &r.output);
+    let _ = writeln!(
+        t,
+        "| tracking error (m) | estimation error (m) | det(cov) (m^4) | %FOV | frames with tag | guidance overruns | frame->setpoint p50/p99 (ms) |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        t,
+        "| {:.3} | {:.3} | {:.2e} | {:.1} | {}/{} | {} | {:.1} / {:.1} |",
+        s.tracking_error_m,
+        s.estimation_error_m,
+        s.cov_det,
+        s.fov_percent,
+        o.vision.detections,
+        o.vision.frames,
+        o.guidance_overruns,
+        percentile(&o.latency_ms, 0.5),
+        percentile(&o.latency_ms, 0.99)
+    );
+}
+
+/// The metrics row of a flight without ground truth (a real camera): what can be known
+/// without it, the estimate's spread instead of its error.
+fn no_truth_rows(t: &mut String, r: &DaemonReport) {
+    let o = &r.output;
+    let spread = super::flight_figures::estimate_spread_m(&o.records);
+    let _ = writeln!(
+        t,
+        "| estimate spread p50/p95 (m, 1 sd along its widest axis) | det(cov) (m^4) | frames with tag | guidance overruns | frame->setpoint p50/p99 (ms) |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|");
+    let _ = writeln!(
+        t,
+        "| {:.2} / {:.2} | {:.2e} | {}/{} | {} | {:.1} / {:.1} |",
+        percentile(&spread, 0.5),
+        percentile(&spread, 0.95),
+        r.summary.cov_det,
+        o.vision.detections,
+        o.vision.frames,
+        o.guidance_overruns,
+        percentile(&o.latency_ms, 0.5),
+        percentile(&o.latency_ms, 0.99)
+    );
+    let _ = writeln!(
+        t,
+        "(no ground truth: no tracking or estimation error, no %FOV)"
+    );
 }
 
 /// Runs the daemon from the command line.
@@ -193,6 +230,7 @@ pub fn run(a: RunArgs, rt: tokio::runtime::Runtime) -> Result<()> {
         motion: motion.clone(),
         tlog: out.as_ref().map(|d| d.join("link.tlog")),
         records_dir: out.clone(),
+        visual_record: a.record.clone(),
         status_line: !a.quiet,
         faults: a.inject.clone(),
         permits: daemon::VehiclePermits {

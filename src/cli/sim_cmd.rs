@@ -38,6 +38,12 @@ pub struct SimArgs {
     /// Write per-step CSV logs of every run and PNG plots here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// A visual record for Foxglove (MCAP): the world, the drone, the target, the estimate,
+    /// the setpoints and the particles over time. Monte Carlo: a folder, one
+    /// `<guidance>_<motion>_run000.mcap` per combination (its first run); `--closed-loop`:
+    /// the file, with the camera's frames too.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
     /// Worker threads (default: one per core).
     #[arg(long, value_parser = numbers::threads)]
     pub threads: Option<usize>,
@@ -89,6 +95,7 @@ fn sim_closed_loop(a: SimArgs) -> Result<()> {
         motion: cfg.daemon.motion.clone(),
         tlog: a.out.as_ref().map(|d| d.join("link.tlog")),
         records_dir: a.out.clone(),
+        visual_record: a.record.clone(),
         status_line: false,
         faults: Vec::new(),
         // The simulated clock refuses anything but the in-process mock.
@@ -150,9 +157,10 @@ pub fn sim(a: SimArgs) -> Result<()> {
         runs,
         seed: a.seed.unwrap_or(cfg.seed),
         duration_s: duration,
-        keep_outputs: a.out.is_some(),
+        keep_outputs: a.out.is_some() || a.record.is_some(),
         progress: !a.quiet,
         vision: a.vision,
+        trace_first_run: a.record.is_some(),
     };
     let result = mc.run(&cfg)?;
     print!("{}", report::table::render(&result));
@@ -164,6 +172,26 @@ pub fn sim(a: SimArgs) -> Result<()> {
     }
     if let Some(dir) = &a.out {
         write_outputs(dir, &cfg, &result, &json)?;
+    }
+    if let Some(dir) = &a.record {
+        write_records(dir, &cfg, &result)?;
+    }
+    Ok(())
+}
+
+/// Each combination's first run as a visual record in `dir`.
+fn write_records(
+    dir: &std::path::Path,
+    cfg: &infotrack::config::Config,
+    result: &infotrack::sim::MonteCarloResult,
+) -> Result<()> {
+    let world = cfg.world();
+    for ((g, m), outs) in &result.outputs {
+        if let Some(first) = outs.first() {
+            let path = dir.join(format!("{g}_{m}_run000.mcap"));
+            report::record::write_run(&path, &world, first, cfg.agent.altitude_m)?;
+            println!("wrote {}", path.display());
+        }
     }
     Ok(())
 }

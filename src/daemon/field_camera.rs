@@ -21,9 +21,16 @@ pub(super) struct FieldCamera {
     noise: ProjectionNoise,
     tag_ids: Vec<u32>,
     tag_size_m: f64,
+    /// The newest frame searched (for a visual record).
+    last_image: Option<crate::vision::image::GrayImage>,
 }
 
 impl FieldCamera {
+    /// The newest frame searched, if any.
+    pub(super) fn last_image(&self) -> Option<&crate::vision::image::GrayImage> {
+        self.last_image.as_ref()
+    }
+
     pub(super) fn open(cfg: &Config) -> Result<Self, PipelineError> {
         let d = &cfg.daemon;
         let calib = d
@@ -50,6 +57,7 @@ impl FieldCamera {
             noise: cfg.vision.projection.clone(),
             tag_ids: vec![cfg.vision.tag_id],
             tag_size_m: cfg.vision.tag_size_m,
+            last_image: None,
         })
     }
 
@@ -114,6 +122,7 @@ impl FieldCamera {
                 None
             }
         };
+        self.last_image = Some(frame.image);
         Some((pose, z))
     }
 }

@@ -34,6 +34,7 @@ mod sensor;
 pub mod simulators;
 mod supervisor;
 mod vehicle_speed;
+pub mod visual;
 
 use airborne::{check_world_origin, connect, launch};
 pub use options::{
@@ -73,6 +74,9 @@ pub enum DaemonError {
     /// The flight's records cannot be written where asked.
     #[error(transparent)]
     Records(#[from] recorder::RecorderError),
+    /// The visual record cannot be written where asked.
+    #[error(transparent)]
+    VisualRecord(#[from] infotrack_record::RecordError),
     /// SIGINT or SIGTERM before tracking began.
     #[error("stopped by a signal {0}")]
     Interrupted(&'static str),
@@ -330,12 +334,18 @@ async fn start_pipeline(
         .as_deref()
         .map(|d| FlightRecorder::open(d, opts.seed, &opts.motion))
         .transpose()?;
+    let visual = opts
+        .visual_record
+        .as_deref()
+        .map(|p| visual::VisualRecord::create(p, &cfg.world()))
+        .transpose()?;
     let thread = {
         let start = pipeline::Start {
             cfg: cfg.clone(),
             motion_name: opts.motion.clone(),
             seed: opts.seed,
             recorder,
+            visual,
             synthetic: opts.simulators.synthetic_world.clone(),
         };
         let shared = shared.clone();

@@ -16,6 +16,8 @@ pub struct RunOptions {
     /// Folder the flight's records (`steps.csv`, `flight.csv`, `summary.json`) are
     /// written into as the flight goes, if any.
     pub records_dir: Option<PathBuf>,
+    /// The visual record (MCAP for Foxglove) written as the flight goes, if any.
+    pub visual_record: Option<PathBuf>,
     /// Print the status line every second on stderr.
     pub status_line: bool,
     /// Faults to inject during the flight (tests, demonstrations).

@@ -174,6 +174,8 @@ struct Pipeline {
     last_frame_ms: f64,
     /// Writes each record as it is made.
     recorder: Option<super::recorder::FlightRecorder>,
+    /// The visual record, written as the flight goes.
+    visual: Option<super::visual::VisualRecord>,
 }
 
 /// Why the pipeline could not start.
@@ -254,6 +256,7 @@ impl Pipeline {
             last_pose: None,
             last_frame_ms: 0.0,
             recorder: None,
+            visual: None,
         })
     }
 
@@ -261,6 +264,12 @@ impl Pipeline {
         if let Some(rec) = self.recorder.as_mut() {
             rec.sync();
             self.out.records_failure = rec.failure().map(str::to_string);
+        }
+        if let Some(v) = self.visual.as_mut() {
+            v.finish();
+            if let Some(why) = v.failure() {
+                self.out.records_failure.get_or_insert(why.to_string());
+            }
         }
         self.out.vision = self.sensor.stats();
         self.out.frames_missed = self.sensor.frames_missed;
@@ -368,6 +377,9 @@ impl Pipeline {
         if let (Some(rec), Some(last)) = (self.recorder.as_mut(), self.out.records.last()) {
             rec.record(last, &self.out.records);
         }
+        if let (Some(v), Some(last)) = (self.visual.as_mut(), self.out.records.last()) {
+            v.note(last, &self.tracker, &self.sensor);
+        }
     }
 
     fn apply(&mut self, decision: Decision) {
@@ -416,6 +428,8 @@ pub struct Start {
     pub seed: u64,
     /// Where the records go as the flight goes, if anywhere.
     pub recorder: Option<super::recorder::FlightRecorder>,
+    /// The visual record, if asked for.
+    pub visual: Option<super::visual::VisualRecord>,
     /// Builds the synthetic camera's world (the program's simulator), if it has one.
     pub synthetic: Option<super::simulators::BuildSyntheticWorld>,
 }
@@ -432,6 +446,7 @@ pub fn run(
     done: mpsc::Sender<()>,
 ) -> PipelineOutput {
     let recorder = start.recorder.take();
+    let visual = start.visual.take();
     let mut p = match Pipeline::build(start, shared) {
         Ok(p) => p,
         Err(e) => {
@@ -440,6 +455,7 @@ pub fn run(
         }
     };
     p.recorder = recorder;
+    p.visual = visual;
     let _ = ready.send(Ready::Ok);
     while ticks.recv().is_ok() {
         p.tick();

@@ -49,6 +49,16 @@ impl DaemonSensor {
         }
     }
 
+    /// The newest frame, synthetic (rendered whole now) or real.
+    pub(super) fn last_image(
+        &self,
+    ) -> Option<std::borrow::Cow<'_, crate::vision::image::GrayImage>> {
+        match &self.frames {
+            Frames::Synthetic(w) => w.last_frame().map(std::borrow::Cow::Owned),
+            Frames::Field(camera, _) => camera.last_image().map(std::borrow::Cow::Borrowed),
+        }
+    }
+
     /// The synthetic camera's world, when the frames are rendered.
     pub(super) fn synthetic(&mut self) -> Option<&mut (dyn SyntheticWorld + 'static)> {
         match &mut self.frames {

@@ -54,6 +54,9 @@ pub trait SyntheticWorld {
     fn stats(&self) -> VisionStats;
     /// How long the last frame took to render, ms.
     fn last_render_ms(&self) -> f64;
+    /// The last frame, every pixel rendered (for a visual record; the search renders only
+    /// what it looks at).
+    fn last_frame(&self) -> Option<crate::vision::image::GrayImage>;
 }
 
 /// Why a simulated part could not start.

@@ -208,3 +208,73 @@ pub fn table_for<'a>(table: &'a mut toml::Table, key: &'a str) -> (&'a mut toml:
     }
     (t, last)
 }
+
+/// The camera of [`film_a_tag`]: ideal, 640 x 480, the config's field of view, nadir.
+pub fn filming_camera(
+    cfg: &infotrack::config::Config,
+) -> infotrack::vision::camera_model::CameraModel {
+    use infotrack::vision::camera_model::{CameraModel, CameraMount, Intrinsics};
+    CameraModel {
+        intrinsics: Intrinsics::ideal(640, 480, cfg.camera.fov_x_rad),
+        mount: CameraMount::nadir(),
+    }
+}
+
+/// Where [`film_a_tag`] films from: over the origin at the agent's altitude, nose north.
+pub fn filming_pose(
+    cfg: &infotrack::config::Config,
+) -> infotrack::vision::camera_model::VehiclePoseNed {
+    infotrack::vision::camera_model::VehiclePoseNed {
+        position_ned_m: [0.0, 0.0, -cfg.agent.altitude_m],
+        roll_rad: 0.0,
+        pitch_rad: 0.0,
+        yaw_rad: 0.0,
+    }
+}
+
+/// A real camera's film for the daemon to fly with: 120 rendered frames (4 s at 30 fps) of
+/// the config's tag at `tag_enu_m`, seen from [`filming_pose`], as `camera.avi` (FFV1) in
+/// `dir`, and the camera's calibration as `camera.yaml`. Returns both paths.
+pub fn film_a_tag(
+    dir: &std::path::Path,
+    cfg: &infotrack::config::Config,
+    tag_enu_m: [f64; 2],
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    use infotrack::render::{render, RenderOptions, SceneEnu, TargetAppearance};
+    use infotrack::vision::{cv_io, tag_family::TagBitmap};
+    use opencv::prelude::*;
+    let cam = filming_camera(cfg);
+    let calib = dir.join("camera.yaml");
+    cv_io::save_calibration(&calib, &cam.intrinsics).unwrap();
+    let pose = filming_pose(cfg);
+    let scene = SceneEnu {
+        target: Some(TargetAppearance {
+            position_enu_m: tag_enu_m,
+            heading_enu_rad: 0.3,
+            tag: TagBitmap::tag36h11(cfg.vision.tag_id).unwrap(),
+            tag_size_m: cfg.vision.tag_size_m,
+        }),
+        occluders: vec![],
+        ground_seed: 2,
+    };
+    let video = dir.join("camera.avi");
+    let mut w = opencv::videoio::VideoWriter::new(
+        &video.display().to_string(),
+        opencv::videoio::VideoWriter::fourcc('F', 'F', 'V', '1').unwrap(),
+        30.0,
+        opencv::core::Size::new(640, 480),
+        false,
+    )
+    .unwrap();
+    let opts = RenderOptions {
+        supersample: 2,
+        noise_sigma: 2.0,
+        ..Default::default()
+    };
+    for k in 0..120 {
+        w.write(&cv_io::mat_from_gray(&render(&cam, &pose, &scene, &opts, k)).unwrap())
+            .unwrap();
+    }
+    w.release().unwrap();
+    (video, calib)
+}

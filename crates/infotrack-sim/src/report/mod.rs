@@ -4,6 +4,7 @@ pub mod bars;
 pub mod csv;
 pub mod markdown;
 pub mod plots;
+pub mod record;
 pub mod table;
 
 use std::path::{Path, PathBuf};

@@ -34,6 +34,8 @@ pub struct MonteCarlo {
     pub progress: bool,
     /// Measure through rendered frames and the real detector (`sim --vision`).
     pub vision: bool,
+    /// Keep run 0's particles at every filter step (`sim --record`); needs `keep_outputs`.
+    pub trace_first_run: bool,
 }
 
 /// How the camera frames went in vision mode, summed over runs.
@@ -207,6 +209,7 @@ impl MonteCarlo {
                     duration_s: self.duration_s,
                     snapshot_times_s: snapshot_times.clone(),
                     vision: self.vision,
+                    trace: self.trace_first_run && r == 0,
                 };
                 let out = run_once(cfg, &world, &spec);
                 bar.inc(1);

@@ -69,6 +69,21 @@ pub struct RunSpec {
     /// Measure through rendered frames, the detector and the projection instead of the
     /// analytic model.
     pub vision: bool,
+    /// Keep every filter step's particles and view heading (for a visual record).
+    pub trace: bool,
+}
+
+/// The particles and the camera's heading at one filter step, for a visual record.
+#[derive(Debug, Clone)]
+pub struct TraceFrame {
+    /// Time, s.
+    pub t_s: f64,
+    /// The way the camera's view faced, world ENU, rad.
+    pub view_yaw_enu_rad: f64,
+    /// Particle positions, world ENU.
+    pub particles_enu: Vec<Enu2>,
+    /// Their weights.
+    pub weights: Vec<f64>,
 }
 
 /// The particle set at one instant.
@@ -95,6 +110,8 @@ pub struct RunOutput {
     pub filter_ms: Vec<f64>,
     /// Frame statistics in vision mode.
     pub vision: Option<crate::simulated::VisionStats>,
+    /// Every filter step's particles and view heading, when the spec asked for them.
+    pub trace: Vec<TraceFrame>,
 }
 
 /// The simulated target's sensor: the analytic model or rendered frames.
@@ -208,6 +225,9 @@ impl SimRun {
             let out = self.tracker.tick(&input, sensor, &clock)?;
             if let Some(step) = out.step {
                 let pf = self.tracker.estimator().particle_filter();
+                if spec.trace {
+                    rec.note_trace(pf, out.t_s, self.agent.view_yaw_enu_rad);
+                }
                 rec.note_step(step, pf, out.t_s, &mut snap_iter);
             }
             if let Some(next) = rec.note_decision(out.decision, out.t_s) {
@@ -226,9 +246,25 @@ struct Recording {
     filter_ms: Vec<f64>,
     guidance_ms: Vec<f64>,
     snapshots: Vec<Snapshot>,
+    trace: Vec<TraceFrame>,
 }
 
 impl Recording {
+    /// The particles of `pf` (none for the Kalman filter) and the view's heading at `t_s`.
+    fn note_trace(
+        &mut self,
+        pf: Option<&infotrack_core::estimation::ParticleFilter>,
+        t_s: f64,
+        view_yaw_enu_rad: f64,
+    ) {
+        self.trace.push(TraceFrame {
+            t_s,
+            view_yaw_enu_rad,
+            particles_enu: pf.map(|p| p.particles()).unwrap_or_default(),
+            weights: pf.map(|p| p.weights().to_vec()).unwrap_or_default(),
+        });
+    }
+
     /// A filter step at `t_s`; the particles of `pf` when a snapshot is due.
     fn note_step(
         &mut self,
@@ -284,6 +320,7 @@ impl Recording {
             guidance_ms: self.guidance_ms,
             filter_ms: self.filter_ms,
             vision: None,
+            trace: self.trace,
         }
     }
 }
@@ -360,6 +397,7 @@ mod tests {
             duration_s: 20.0,
             snapshot_times_s: vec![5.0, 10.0],
             vision: false,
+            trace: false,
         }
     }
 

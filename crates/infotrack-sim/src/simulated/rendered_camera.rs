@@ -83,17 +83,13 @@ impl VisionSensor {
         &self.cam
     }
 
-    /// One frame from `view`: the measured target position (world ENU), if the tag was found.
-    /// `predicted` is the filter's prior (mean and covariance, world ENU): the detector
-    /// searches around it first.
-    pub fn measure(
-        &mut self,
+    /// The camera's pose over `view` and the scene it sees with the target at `target_enu`.
+    fn pose_and_scene(
+        &self,
         view: &View,
         target_enu: &Enu2,
         target_heading_enu_rad: f64,
-        predicted: Option<(Enu2, nalgebra::Matrix2<f64>)>,
-        frame_seed: u64,
-    ) -> Result<Option<Enu2>, VisionError> {
+    ) -> (VehiclePoseNed, SceneEnu) {
         // The camera is mounted straight: the vehicle's nose is the image's top.
         let mut pose = VehiclePoseNed::level_above(&view.centre_enu, self.altitude_m);
         pose.yaw_rad = yaw_enu_to_ned(view.yaw_enu_rad);
@@ -107,6 +103,34 @@ impl VisionSensor {
             occluders: self.occluders.clone(),
             ground_seed: 17,
         };
+        (pose, scene)
+    }
+
+    /// The whole frame [`Self::measure`] searches with the same arguments, every pixel
+    /// rendered (for a visual record; the search renders only what it looks at).
+    pub fn whole_frame(
+        &self,
+        view: &View,
+        target_enu: &Enu2,
+        target_heading_enu_rad: f64,
+        frame_seed: u64,
+    ) -> infotrack_vision::image::GrayImage {
+        let (pose, scene) = self.pose_and_scene(view, target_enu, target_heading_enu_rad);
+        crate::render::render(&self.cam, &pose, &scene, &self.opts, frame_seed)
+    }
+
+    /// One frame from `view`: the measured target position (world ENU), if the tag was found.
+    /// `predicted` is the filter's prior (mean and covariance, world ENU): the detector
+    /// searches around it first.
+    pub fn measure(
+        &mut self,
+        view: &View,
+        target_enu: &Enu2,
+        target_heading_enu_rad: f64,
+        predicted: Option<(Enu2, nalgebra::Matrix2<f64>)>,
+        frame_seed: u64,
+    ) -> Result<Option<Enu2>, VisionError> {
+        let (pose, scene) = self.pose_and_scene(view, target_enu, target_heading_enu_rad);
         let mut frame = RenderedFrame::new(&self.cam, &pose, &scene, &self.opts, frame_seed);
         self.stats.frames += 1;
         let side_px = self.tag_size_m * self.cam.intrinsics.fx_px / self.altitude_m;

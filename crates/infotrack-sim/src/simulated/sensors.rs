@@ -66,6 +66,8 @@ pub struct RenderedSensor {
     rng: CoreRng,
     target_enu: Enu2,
     target_heading_enu_rad: f64,
+    /// What the last frame was taken with: view, target, heading, noise seed.
+    last_frame: Option<(View, Enu2, f64, u64)>,
 }
 
 impl RenderedSensor {
@@ -76,7 +78,15 @@ impl RenderedSensor {
             rng,
             target_enu: Enu2::zeros(),
             target_heading_enu_rad: 0.0,
+            last_frame: None,
         }
+    }
+
+    /// The last frame, rendered whole (the measurement rendered only what it searched): the
+    /// same pixels, for a visual record.
+    pub fn last_frame(&self) -> Option<infotrack_vision::image::GrayImage> {
+        let (view, target, heading, seed) = self.last_frame?;
+        Some(self.camera.whole_frame(&view, &target, heading, seed))
     }
 
     /// Where the true target is now and where it heads, world ENU.
@@ -93,6 +103,12 @@ impl RenderedSensor {
         prior: &Prior,
         frame_seed: u64,
     ) -> Result<Option<Enu2>, VisionError> {
+        self.last_frame = Some((
+            *view,
+            self.target_enu,
+            self.target_heading_enu_rad,
+            frame_seed,
+        ));
         self.camera.measure(
             view,
             &self.target_enu,
