@@ -67,7 +67,6 @@ pub struct RunArgs {
 
 /// The results table of one daemon run.
 pub fn table(r: &DaemonReport, motion: &str) -> String {
-    let s = &r.summary;
     let o = &r.output;
     let mut t = String::new();
     // A simulated target (the synthetic camera) makes it a closed loop with truth; a real
