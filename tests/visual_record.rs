@@ -216,7 +216,7 @@ fn a_real_camera_flight_reports_what_it_can_know_and_records_its_frames() {
         "{said}"
     );
     assert!(
-        said.contains("estimate spread p50/p95") && !said.contains("NaN"),
+        said.contains("estimate spread p50/p99") && !said.contains("NaN"),
         "{said}"
     );
     assert!(!said.contains("tracking error (m)"), "{said}");

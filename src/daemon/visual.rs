@@ -67,6 +67,14 @@ impl VisualRecord {
     }
 }
 
+/// A record dropped unfinished (a start that failed, a pipeline that died) is still
+/// finished: its summary and index written, so that any MCAP reader opens what it holds.
+impl Drop for VisualRecord {
+    fn drop(&mut self) {
+        self.finish();
+    }
+}
+
 fn write_step(
     r: &mut Recorder,
     rec: &FlightRecord,
