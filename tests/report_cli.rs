@@ -66,6 +66,13 @@ fn a_campaign_carries_bootstrap_intervals_and_renders_as_a_report() {
             c["guidance"]
         );
     }
+    let run = &v["results"][0]["per_run"][3];
+    assert_eq!(
+        (run["run"].as_u64(), run["seed"].as_u64()),
+        (Some(3), Some(7)),
+        "{run}"
+    );
+    assert_eq!(run["world"], "paper-lab (drawn in the config)");
     let lawn = &v["results"][1]["paired_vs_eer"]["metrics"][0];
     let diff = lawn["t_test"]["mean_diff"].as_f64().unwrap();
     let boot = &lawn["mean_diff_ci95_bootstrap"];

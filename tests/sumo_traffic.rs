@@ -130,6 +130,8 @@ fn a_generated_network_gives_a_world_and_tracks_the_simulator_flies() {
     for (i, r) in runs.iter().enumerate() {
         assert_eq!(r["run"].as_u64(), Some(i as u64), "{r}");
         assert!(r["seed"].is_u64() && r["seed"] == results["seed"], "{r}");
+        assert_eq!(r["version"], env!("CARGO_PKG_VERSION"), "{r}");
+        assert!(r["world"].as_str().unwrap().ends_with(".geojson"), "{r}");
         let track = r["track"].as_str().unwrap();
         assert!(
             track.ends_with(tracks[i % 2]["file"].as_str().unwrap()),

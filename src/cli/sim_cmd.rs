@@ -205,6 +205,15 @@ fn results_json(
     source: Option<&std::path::Path>,
 ) -> Result<serde_json::Value> {
     let mut v = serde_json::to_value(result).context("the results as JSON")?;
+    // The world each run flew: its GeoJSON file, or the scenario whose config draws it.
+    let world = cfg
+        .world
+        .as_ref()
+        .and_then(|w| w.geojson.as_ref())
+        .map_or_else(
+            || format!("{} (drawn in the config)", cfg.name),
+            |p| p.display().to_string(),
+        );
     let tracks: Vec<String> = cfg
         .target
         .trajectory
@@ -220,6 +229,8 @@ fn results_json(
         {
             run["run"] = i.into();
             run["seed"] = result.seed.into();
+            run["world"] = world.clone().into();
+            run["version"] = env!("CARGO_PKG_VERSION").into();
             if !tracks.is_empty() {
                 run["track"] = tracks[i % tracks.len()].clone().into();
             }
