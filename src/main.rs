@@ -26,6 +26,8 @@ struct Cli {
 enum Command {
     /// Monte Carlo benchmark of guidance laws and motion models on the simulator.
     Sim(SimArgs),
+    /// Join a campaign's shards (`sim --shard K/N --json`) into its table and results.
+    Merge(cli::merge_cmd::MergeArgs),
     /// A campaign's results.json (from `sim`) as a Markdown report with its bar chart.
     Report(cli::report_cmd::ReportArgs),
     /// Time the core (PF step, EER cycle) on one thread and print a table.
@@ -177,6 +179,7 @@ fn main() -> ExitCode {
         Command::Run(a) => runtime().and_then(|rt| run_cmd::run(a, rt)),
         Command::Replay(a) => run_cmd::replay(a),
         Command::Report(a) => cli::report_cmd::report(a),
+        Command::Merge(a) => cli::merge_cmd::merge(a),
         Command::Bench(a) => bench(a),
         Command::Detect(a) => detect::run(a.path, a.json, a.pose, a.annotate, a.ids),
         Command::Dataset(a) => dataset(a),

@@ -232,6 +232,7 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
         progress: false,
         vision: true,
         trace_first_run: false,
+        shard: None,
     }
     .run(&cfg)
     .unwrap();

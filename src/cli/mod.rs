@@ -11,6 +11,7 @@ pub mod detect_bench;
 pub mod flight_figures;
 pub mod flight_folder;
 pub mod folder_log;
+pub mod merge_cmd;
 pub mod mock_cmd;
 pub mod numbers;
 pub mod params_cmd;

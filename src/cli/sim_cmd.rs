@@ -38,6 +38,11 @@ pub struct SimArgs {
     /// Write per-step CSV logs of every run and PNG plots here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Run only shard K of N (`K/N`): the runs whose index is K modulo N, for a campaign
+    /// split into independent jobs (a Slurm array); `infotrack merge` joins the shards'
+    /// `--json` files into the campaign's results.
+    #[arg(long)]
+    pub shard: Option<infotrack::sim::monte_carlo::Shard>,
     /// A visual record for Foxglove (MCAP): the world, the drone, the target, the estimate,
     /// the setpoints and the particles over time. Monte Carlo: a folder, one
     /// `<guidance>_<motion>_run000.mcap` per combination (its first run); `--closed-loop`:
@@ -161,11 +166,12 @@ pub fn sim(a: SimArgs) -> Result<()> {
         progress: !a.quiet,
         vision: a.vision,
         trace_first_run: a.record.is_some(),
+        shard: a.shard,
     };
     let result = mc.run(&cfg)?;
     print!("{}", report::table::render(&result));
     print_vision(&result);
-    let json = results_json(&result, &cfg, a.config.as_deref())?;
+    let json = results_json(&result, &cfg, a.config.as_deref(), a.shard)?;
     if let Some(p) = &a.json {
         report::write_json(p, &json)?;
         println!("wrote {}", p.display());
@@ -203,6 +209,7 @@ fn results_json(
     result: &infotrack::sim::MonteCarloResult,
     cfg: &infotrack::config::Config,
     source: Option<&std::path::Path>,
+    shard: Option<infotrack::sim::monte_carlo::Shard>,
 ) -> Result<serde_json::Value> {
     let mut v = serde_json::to_value(result).context("the results as JSON")?;
     // The world each run flew: its GeoJSON file, or the scenario whose config draws it.
@@ -221,12 +228,15 @@ fn results_json(
         .map(|t| t.files().iter().map(|f| f.display().to_string()).collect())
         .unwrap_or_default();
     for combo in v["results"].as_array_mut().into_iter().flatten() {
-        for (i, run) in combo["per_run"]
+        let indices: Vec<u64> = serde_json::from_value(combo["run_indices"].clone())
+            .context("the results' run indices")?;
+        for (run, &i) in combo["per_run"]
             .as_array_mut()
             .into_iter()
             .flatten()
-            .enumerate()
+            .zip(&indices)
         {
+            let i = i as usize;
             run["run"] = i.into();
             run["seed"] = result.seed.into();
             run["world"] = world.clone().into();
@@ -241,6 +251,9 @@ fn results_json(
         "commit": env!("INFOTRACK_COMMIT"),
     });
     v["config"] = super::flight_folder::source_name(source).into();
+    if let Some(s) = shard {
+        v["shard"] = serde_json::json!({"index": s.index, "count": s.count});
+    }
     Ok(v)
 }
 

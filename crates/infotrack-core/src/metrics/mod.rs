@@ -52,20 +52,28 @@ impl StepRecord {
     }
 }
 
-/// One run's metrics: means over its steps, and timing medians.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+/// One run's metrics: means over its steps, and timing medians. Read back from JSON (a
+/// campaign's shards are merged from theirs), where a figure that could not be measured
+/// (NaN) was written as `null`.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct RunSummary {
     /// Mean tracking error, m.
+    #[serde(deserialize_with = "nan_if_null")]
     pub tracking_error_m: f64,
     /// Mean estimation error, m.
+    #[serde(deserialize_with = "nan_if_null")]
     pub estimation_error_m: f64,
     /// Mean det of the covariance, m^4.
+    #[serde(deserialize_with = "nan_if_null")]
     pub cov_det: f64,
     /// Share of steps with a measurement, percent.
+    #[serde(deserialize_with = "nan_if_null")]
     pub fov_percent: f64,
     /// Median filter step time, ms.
+    #[serde(deserialize_with = "nan_if_null")]
     pub filter_step_ms: f64,
     /// Median guidance step time, ms.
+    #[serde(deserialize_with = "nan_if_null")]
     pub guidance_step_ms: f64,
     /// When the target was first measured, s since the start (the search's length); `None`
     /// when it never was.
@@ -98,6 +106,12 @@ impl RunSummary {
                 .map(|k| mean_over(&steps[k..], StepRecord::tracking_error_m)),
         }
     }
+}
+
+/// A number that JSON may hold as `null` (NaN has no JSON form).
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// The mean of `f` over `steps` (0 for none).

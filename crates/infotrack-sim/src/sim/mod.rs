@@ -3,6 +3,7 @@
 //! live in [`crate::simulated`], where the daemon uses them too.
 
 pub mod dataset;
+pub mod merge;
 pub mod monte_carlo;
 pub mod run;
 

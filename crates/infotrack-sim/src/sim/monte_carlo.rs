@@ -36,6 +36,43 @@ pub struct MonteCarlo {
     pub vision: bool,
     /// Keep run 0's particles at every filter step (`sim --record`); needs `keep_outputs`.
     pub trace_first_run: bool,
+    /// Run only this shard's runs (`sim --shard K/N`); `None`: all of them.
+    pub shard: Option<Shard>,
+}
+
+/// One of N independent parts of a campaign: the runs whose index is K modulo N. Every run
+/// draws from its own seeded streams, so a run is the same in whichever shard it runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct Shard {
+    /// K, from 0.
+    pub index: u64,
+    /// N.
+    pub count: u64,
+}
+
+impl Shard {
+    /// Whether run `r` is this shard's.
+    pub fn has(&self, r: u64) -> bool {
+        r % self.count == self.index
+    }
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+
+    /// `K/N`, 0 <= K < N.
+    fn from_str(text: &str) -> Result<Self, String> {
+        let bad = || format!("`{text}`: a shard is K/N with 0 <= K < N, e.g. 0/4");
+        let (k, n) = text.split_once('/').ok_or_else(bad)?;
+        let (index, count) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if count == 0 || index >= count {
+            return Err(bad());
+        }
+        Ok(Self { index, count })
+    }
 }
 
 /// How the camera frames went in vision mode, summed over runs.
@@ -116,6 +153,9 @@ pub struct ComboResult {
     pub motion: String,
     /// Number of runs.
     pub runs: usize,
+    /// The campaign index of each run, in the order of `per_run` (0, 1, ... unless a shard
+    /// ran only some).
+    pub run_indices: Vec<u64>,
     /// Tracking error, m: mean and sd over runs of each run's mean.
     pub tracking_error_m: MeanSd,
     /// Estimation error, m.
@@ -189,8 +229,12 @@ impl MonteCarlo {
         if combos.is_empty() {
             return Err(first_err.map_or(RunError::NothingToRun, RunError::from));
         }
+        let shard = self.shard;
+        let runs: Vec<u64> = (0..self.runs)
+            .filter(|r| shard.map_or(true, |s| s.has(*r)))
+            .collect();
         let jobs: Vec<(usize, u64)> = (0..combos.len())
-            .flat_map(|c| (0..self.runs).map(move |r| (c, r)))
+            .flat_map(|c| runs.iter().map(move |r| (c, *r)))
             .collect();
         let bar = progress_bar(self.progress, jobs.len());
         let snapshot_times: Vec<f64> = [1.0 / 6.0, 0.5, 5.0 / 6.0]
@@ -225,11 +269,9 @@ impl MonteCarlo {
         let mut results: Vec<ComboResult> = combos
             .iter()
             .zip(&by_combo)
-            .map(|((g, e), outs)| aggregate(*g, e, outs))
+            .map(|((g, e), outs)| aggregate(*g, e, outs, &runs))
             .collect();
-        add_bootstrap_intervals(&mut results, self.seed);
-        add_welch_tests(&mut results);
-        add_paired_tests(&mut results, self.seed);
+        compare(&mut results, self.seed);
         let mut outputs_map = BTreeMap::new();
         if self.keep_outputs {
             for ((g, e), outs) in combos.iter().zip(by_combo) {
@@ -247,52 +289,82 @@ impl MonteCarlo {
     }
 }
 
-fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput]) -> ComboResult {
-    let per_run: Vec<RunSummary> = outs.iter().map(|o| o.summary).collect();
-    let col = |f: fn(&RunSummary) -> f64| mean_sd(&per_run.iter().map(f).collect::<Vec<_>>());
-    let all_filter: Vec<f64> = outs
-        .iter()
-        .flat_map(|o| o.filter_ms.iter().copied())
-        .collect();
-    let all_guid: Vec<f64> = outs
-        .iter()
-        .flat_map(|o| o.guidance_ms.iter().copied())
-        .collect();
-    ComboResult {
-        guidance: g.to_string(),
-        motion: e.name().to_string(),
-        runs: outs.len(),
-        tracking_error_m: col(|s| s.tracking_error_m),
-        estimation_error_m: col(|s| s.estimation_error_m),
-        cov_det: col(|s| s.cov_det),
-        fov_percent: col(|s| s.fov_percent),
-        ci95_bootstrap: BTreeMap::new(),
-        filter_step_ms: Median {
-            median: median(&all_filter),
-        },
-        guidance_step_ms: Median {
-            median: median(&all_guid),
-        },
-        welch_vs_eer: None,
-        paired_vs_eer: None,
-        vision: outs
-            .iter()
-            .filter_map(|o| o.vision)
-            .fold(None, |acc: Option<VisionSummary>, v| {
-                let a = acc.unwrap_or(VisionSummary {
-                    frames: 0,
-                    detections: 0,
-                    roi_hits: 0,
-                });
-                Some(VisionSummary {
-                    frames: a.frames + v.frames,
-                    detections: a.detections + v.detections,
-                    roi_hits: a.roi_hits + v.roi_hits,
-                })
-            }),
-        search: SearchSummary::over(&per_run),
-        per_run,
+fn aggregate(g: GuidanceKind, e: &EstimatorKind, outs: &[RunOutput], runs: &[u64]) -> ComboResult {
+    let all = |f: fn(&RunOutput) -> &Vec<f64>| -> Vec<f64> {
+        outs.iter().flat_map(|o| f(o).iter().copied()).collect()
+    };
+    let vision = outs.iter().filter_map(|o| o.vision).fold(None, |acc, v| {
+        Some(VisionSummary::sum(acc, v.frames, v.detections, v.roi_hits))
+    });
+    ComboResult::from_runs(
+        (g.to_string(), e.name().to_string()),
+        outs.iter().map(|o| o.summary).collect(),
+        runs.to_vec(),
+        [
+            median(&all(|o| &o.filter_ms)),
+            median(&all(|o| &o.guidance_ms)),
+        ],
+        vision,
+    )
+}
+
+impl VisionSummary {
+    /// `acc` (none yet: zero) plus these counts.
+    pub fn sum(acc: Option<Self>, frames: u64, detections: u64, roi_hits: u64) -> Self {
+        let a = acc.unwrap_or(Self {
+            frames: 0,
+            detections: 0,
+            roi_hits: 0,
+        });
+        Self {
+            frames: a.frames + frames,
+            detections: a.detections + detections,
+            roi_hits: a.roi_hits + roi_hits,
+        }
     }
+}
+
+impl ComboResult {
+    /// One law and model's aggregates from its runs' summaries (`run_indices` names them),
+    /// the medians of its filter and guidance step times, and its frame counts; the
+    /// comparisons with EER are left to [`compare`].
+    pub fn from_runs(
+        (guidance, motion): (String, String),
+        per_run: Vec<RunSummary>,
+        run_indices: Vec<u64>,
+        [filter_ms, guidance_ms]: [f64; 2],
+        vision: Option<VisionSummary>,
+    ) -> Self {
+        let col = |f: fn(&RunSummary) -> f64| mean_sd(&per_run.iter().map(f).collect::<Vec<_>>());
+        Self {
+            guidance,
+            motion,
+            runs: per_run.len(),
+            run_indices,
+            tracking_error_m: col(|s| s.tracking_error_m),
+            estimation_error_m: col(|s| s.estimation_error_m),
+            cov_det: col(|s| s.cov_det),
+            fov_percent: col(|s| s.fov_percent),
+            ci95_bootstrap: BTreeMap::new(),
+            filter_step_ms: Median { median: filter_ms },
+            guidance_step_ms: Median {
+                median: guidance_ms,
+            },
+            welch_vs_eer: None,
+            paired_vs_eer: None,
+            vision,
+            search: SearchSummary::over(&per_run),
+            per_run,
+        }
+    }
+}
+
+/// Every statistic that compares runs: each mean's bootstrap interval, and EER against
+/// every other law (Welch, and paired with Holm's correction), from the campaign's seed.
+pub fn compare(results: &mut [ComboResult], seed: u64) {
+    add_bootstrap_intervals(results, seed);
+    add_welch_tests(results);
+    add_paired_tests(results, seed);
 }
 
 /// A progress bar over `jobs` runs, or a hidden one.
