@@ -5,7 +5,9 @@
 #   fly the mock with;
 # - .deps/stats: SciPy, which the paired statistics are checked against;
 # - .deps/sumo: Eclipse SUMO and sumolib, the reference traffic (scripts/sumo-traffic.py);
-# - osmium-tool: cuts an OpenStreetMap .pbf extract to XML for SUMO's netconvert.
+# - osmium-tool: cuts an OpenStreetMap .pbf extract to XML for SUMO's netconvert;
+# - slurm-wlm and munge: a one-node Slurm cluster (scripts/slurm-local.sh) that runs a
+#   campaign's shards as an array job (scripts/slurm-campaign.sh).
 # Idempotent: does nothing when everything is present.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,10 +29,14 @@ venv_from .deps/stats tests/stats/requirements.txt "SciPy"
 
 venv_from .deps/sumo tests/sumo/requirements.txt "Eclipse SUMO"
 
-if ! dpkg -s osmium-tool >/dev/null 2>&1; then
-  echo "setup-tests: installing Debian's osmium-tool" >&2
+missing=()
+for pkg in osmium-tool slurm-wlm munge; do
+  dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup-tests: installing Debian's ${missing[*]}" >&2
   SUDO=""
   [ "$(id -u)" -ne 0 ] && SUDO="sudo"
   $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq osmium-tool >/dev/null
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
 fi
