@@ -96,6 +96,7 @@ pub fn figures(r: &DaemonReport, res: &Resources) -> Value {
         "frames_with_tag": o.vision.detections,
         "filter_periods_without_frame": o.frames_missed,
         "guidance_overruns": o.guidance_overruns,
+        "lowest_effort_level": o.lowest_effort_level,
         "estimate_spread_m": quantiles(&estimate_spread_m(&o.records)),
         "frame_to_setpoint_ms": quantiles(&o.latency_ms),
         "detection_ms": quantiles(&o.detect_ms),
@@ -106,6 +107,8 @@ pub fn figures(r: &DaemonReport, res: &Resources) -> Value {
         "mode_changes_before_arming": mode_changes(&r.mode_changes_before_arming),
         "link_losses": r.link_losses,
         "geofence_refusals": r.geofence_refusals,
+        "setpoints_sent": r.setpoints_sent,
+        "setpoint_rate_hz": r.setpoint_rate_hz.map_or(Value::Null, finite),
         "resources": {
             "cpu_percent_of_one_core": finite(res.cpu_percent()),
             "wall_s": res.wall_s,

@@ -96,11 +96,21 @@ pub fn table(r: &DaemonReport, motion: &str) -> String {
     let pp = |v: &[f64]| format!("{:.1}/{:.1}", percentile(v, 0.5), percentile(v, 0.99));
     let _ = writeln!(
         t,
-        "frame->setpoint parts p50/p99 (ms): detection {}, filter {}, guidance {}",
+        "frame->setpoint parts p50/p99 (ms): detection {}, filter {}, guidance {}; {} setpoints streamed at {}",
         pp(&o.detect_ms),
         pp(&o.update_ms),
-        pp(&o.guidance_ms)
+        pp(&o.guidance_ms),
+        r.setpoints_sent,
+        r.setpoint_rate_hz
+            .map_or_else(|| "-".to_string(), |hz| format!("{hz:.1} Hz"))
     );
+    if o.lowest_effort_level > 0 {
+        let _ = writeln!(
+            t,
+            "guidance: too slow for its budget at times; EER planned with as few as 1/{} of its hypotheses",
+            1u32 << o.lowest_effort_level
+        );
+    }
     let final_mode = r
         .final_mode
         .map_or_else(|| "an unknown mode".to_string(), |m| m.to_string());

@@ -27,6 +27,7 @@ pub struct GcsReporter {
     ever_seen: bool,
     records_failure_said: bool,
     last_values: Option<Instant>,
+    effort_level: u8,
 }
 
 impl GcsReporter {
@@ -39,6 +40,7 @@ impl GcsReporter {
             ever_seen: false,
             records_failure_said: false,
             last_values: None,
+            effort_level: 0,
         }
     }
 
@@ -76,6 +78,10 @@ impl GcsReporter {
                 MAV_SEVERITY_CRITICAL,
                 "infotrack: log write failed (disk full?)".to_string(),
             ));
+        }
+        if s.effort_level != self.effort_level {
+            out.push(effort_said(self.effort_level, s.effort_level));
+            self.effort_level = s.effort_level;
         }
         if s.seen && !self.ever_seen {
             self.ever_seen = true;
@@ -132,6 +138,32 @@ impl GcsReporter {
     }
 }
 
+/// What the GCS is told when EER's effort changes from level `before` to `now`.
+fn effort_said(before: u8, now: u8) -> (MavSeverity, String) {
+    if now > before {
+        (
+            MavSeverity::MAV_SEVERITY_WARNING,
+            format!(
+                "infotrack: computer too slow, planning with 1/{} of the hypotheses",
+                1u32 << now
+            ),
+        )
+    } else if now > 0 {
+        (
+            MavSeverity::MAV_SEVERITY_INFO,
+            format!(
+                "infotrack: planning with 1/{} of the hypotheses",
+                1u32 << now
+            ),
+        )
+    } else {
+        (
+            MavSeverity::MAV_SEVERITY_INFO,
+            "infotrack: planning with every hypothesis again".to_string(),
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -146,7 +178,25 @@ mod tests {
             radius_m: 2.0,
             records_failed: false,
             estimate_enu: [1.0, 2.0],
+            effort_level: 0,
         }
+    }
+
+    #[test]
+    fn a_lowered_effort_is_said_as_a_warning_and_its_return_as_information() {
+        let mut r = GcsReporter::new("lawn");
+        let mut s = status(false, TrackState::Tracking);
+        r.events(&s);
+        s.effort_level = 2;
+        let said = r.events(&s);
+        assert_eq!(said.len(), 1);
+        assert_eq!(said[0].0, MavSeverity::MAV_SEVERITY_WARNING);
+        assert!(said[0].1.contains("1/4 of the hypotheses"), "{said:?}");
+        assert!(r.events(&s).is_empty(), "said once");
+        s.effort_level = 0;
+        let said = r.events(&s);
+        assert_eq!(said[0].0, MavSeverity::MAV_SEVERITY_INFO);
+        assert!(said[0].1.contains("every hypothesis again"), "{said:?}");
     }
 
     #[test]

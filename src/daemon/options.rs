@@ -148,6 +148,10 @@ pub struct DaemonReport {
     pub link_losses: u32,
     /// Setpoints refused by the geofence check.
     pub geofence_refusals: u64,
+    /// Setpoints streamed to the vehicle.
+    pub setpoints_sent: u64,
+    /// Their rate between the first and the last, Hz (`None` before two).
+    pub setpoint_rate_hz: Option<f64>,
     /// The firmware flown.
     pub flavor: Flavor,
     /// Where it was reached (`mock:px4 via udpout:...` or the URL).

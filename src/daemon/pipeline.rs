@@ -57,6 +57,9 @@ pub struct Status {
     pub records_failed: bool,
     /// The target estimate, world ENU, m.
     pub estimate_enu: [f64; 2],
+    /// EER weighs 1 / 2^this of its hypotheses: lowered when decisions take most of their
+    /// compute budget (a slow computer), 0 at full effort.
+    pub effort_level: u8,
 }
 
 /// What the supervisor tells the pipeline, rewritten every 20 ms.
@@ -147,6 +150,9 @@ pub struct PipelineOutput {
     pub vision: VisionStats,
     /// Filter periods without a camera frame.
     pub frames_missed: u64,
+    /// The lowest effort EER planned with: it weighed 1 / 2^this of its hypotheses (0:
+    /// always all of them).
+    pub lowest_effort_level: u8,
 }
 
 /// Messages from the pipeline thread before it runs.
@@ -360,7 +366,12 @@ impl Pipeline {
                 .as_ref()
                 .is_some_and(|r| r.failure().is_some()),
             estimate_enu: [step.record.estimate_enu.x, step.record.estimate_enu.y],
+            effort_level: self.tracker.effort_level(),
         });
+        self.out.lowest_effort_level = self
+            .out
+            .lowest_effort_level
+            .max(self.tracker.effort_level());
         self.out.records.push(FlightRecord {
             pose: self
                 .sensor

@@ -461,6 +461,7 @@ pub(super) async fn stop(
         }
     };
     let state = link.state();
+    let setpoints = link.setpoint_stats();
     link.flush_tlog();
     // The metrics are those of the time infotrack had the vehicle (none if it never did).
     let from_s = tracked.engaged_after_s.unwrap_or(f64::INFINITY);
@@ -479,6 +480,8 @@ pub(super) async fn stop(
         mode_changes_before_arming: state.mode_changes_before_arming.clone(),
         link_losses: tracked.link_losses,
         geofence_refusals: tracked.geofence_refusals,
+        setpoints_sent: setpoints.sent,
+        setpoint_rate_hz: setpoints.rate_hz(),
         flavor: vehicle.flavor,
         vehicle: match &vehicle.mock {
             Some(_) => format!("{} via {}", vehicle.name, vehicle.url),

@@ -590,6 +590,9 @@ pub fn belief_is_concentrated(pf: &ParticleFilter, world: &World) -> bool {
     cov[(0, 0)].sqrt() <= 0.5 * fp.half_width_m && cov[(1, 1)].sqrt() <= 0.5 * fp.half_height_m
 }
 
+/// The fewest hypotheses EER weighs when its effort is lowered for a slow computer.
+pub const MIN_DEGRADED_HYPOTHESES: usize = 50;
+
 /// The EER guidance law: owns its scratch buffers across cycles.
 #[derive(Debug, Clone)]
 pub struct EerPlanner {
@@ -607,6 +610,9 @@ pub struct EerPlanner {
     /// The target's velocity, world ENU, m/s, while the vehicle rides along with it (the
     /// belief concentrated under the view): the candidates' views turn as the command will.
     over_target_velocity_enu: Option<Enu2>,
+    /// The hypotheses weighed are N_H over this (1: all; the tracker raises it when
+    /// decisions overrun their compute budget).
+    effort_divisor: usize,
 }
 
 impl EerPlanner {
@@ -661,7 +667,14 @@ impl EerPlanner {
             last_waypoint_enu: None,
             escape_weighting: false,
             over_target_velocity_enu: None,
+            effort_divisor: 1,
         }
+    }
+
+    /// Weighs N_H / `divisor` hypotheses (never fewer than [`MIN_DEGRADED_HYPOTHESES`] or N_H
+    /// itself): fewer on a computer too slow for the configured count.
+    pub fn set_effort_divisor(&mut self, divisor: usize) {
+        self.effort_divisor = divisor.max(1);
     }
 
     /// Whether the vehicle rides along with the target at this velocity (world ENU, m/s;
@@ -696,6 +709,7 @@ impl EerPlanner {
         } else {
             all
         };
+        let n_h = (n_h / self.effort_divisor).max(n_h.min(MIN_DEGRADED_HYPOTHESES));
         self.indices.clear();
         if n_h >= n {
             self.indices.extend(0..n);

@@ -12,6 +12,7 @@
 //! passed in to time the work), every random draw from the generators it was given.
 
 pub mod clock;
+pub mod effort;
 pub mod estimator;
 pub mod ports;
 pub mod schedule;
@@ -220,6 +221,8 @@ pub struct Tracker {
     /// KF guidance always has a Kalman filter beside the estimator for its goal.
     side_kf: Option<KalmanFilter>,
     planner: EerPlanner,
+    /// How many of its hypotheses EER weighs under the compute budget.
+    effort: effort::Effort,
     lawn: LawnmowerPath,
     rng_filter: CoreRng,
     rng_guidance: CoreRng,
@@ -295,6 +298,7 @@ impl Tracker {
         Ok(Self {
             schedule: Schedule::new(params.rates),
             planner: EerPlanner::new(params.eer.clone()),
+            effort: effort::Effort::default(),
             lawn: LawnmowerPath::new(&params.lawn),
             params,
             world,

@@ -24,6 +24,9 @@ impl Tracker {
         let compute_ms = (clock.now_s() - started) * 1e3;
         let failsafe = self.params.failsafe;
         let over_budget = failsafe.is_some_and(|f| compute_ms > f.guidance_budget_ms);
+        if let Some(f) = failsafe.filter(|_| self.params.guidance == GuidanceKind::Eer) {
+            self.adapt_effort(compute_ms, f.guidance_budget_ms);
+        }
         let command = match decided {
             Ok(c) => c,
             Err(e) if failsafe.is_some() => {
@@ -58,6 +61,33 @@ impl Tracker {
             command,
             compute_ms,
         }))
+    }
+
+    /// Lowers or raises EER's effort after a decision that took `compute_ms` of its budget
+    /// ([`effort::Effort`]), and says so.
+    fn adapt_effort(&mut self, compute_ms: f64, budget_ms: f64) {
+        let Some(change) = self.effort.note(compute_ms, budget_ms) else {
+            return;
+        };
+        self.planner.set_effort_divisor(self.effort.divisor());
+        let n_h = self.params.eer.entropy_particles / self.effort.divisor();
+        match change {
+            effort::EffortChange::Lowered { .. } => tracing::warn!(
+                "guidance took {compute_ms:.0} ms of its {budget_ms:.0} ms budget: EER now weighs {n_h} hypotheses (1/{} of its {})",
+                self.effort.divisor(),
+                self.params.eer.entropy_particles
+            ),
+            effort::EffortChange::Raised { .. } => tracing::info!(
+                "guidance is quick again: EER now weighs {n_h} hypotheses (1/{} of its {})",
+                self.effort.divisor(),
+                self.params.eer.entropy_particles
+            ),
+        }
+    }
+
+    /// How much of its hypotheses EER weighs: 1 / 2^level (0: all of them).
+    pub fn effort_level(&self) -> u8 {
+        self.effort.level()
     }
 
     /// What the guidance law (or the failsafe in force) says, before the geofence and the

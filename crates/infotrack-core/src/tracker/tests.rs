@@ -901,3 +901,54 @@ fn a_long_unseen_target_is_waited_for_on_the_roads() {
     off.guidance.ambush_window_s = Some(0.0);
     assert_eq!(unseen_for(&off, after_s + 5.0).ambush_point_enu, None);
 }
+
+/// A clock on which each reading is `step_s` after the last: every decision takes it.
+struct SlowClock {
+    now_s: std::cell::Cell<f64>,
+    step_s: f64,
+}
+
+impl Clock for SlowClock {
+    fn now_s(&self) -> f64 {
+        let t = self.now_s.get() + self.step_s;
+        self.now_s.set(t);
+        t
+    }
+}
+
+#[test]
+fn decisions_that_take_most_of_their_budget_lower_eers_effort_and_still_fly() {
+    let c = Config::default_lab();
+    let mut t = tracker(&c, GuidanceKind::Eer, true);
+    let budget_ms = c.daemon.guidance_budget_ms;
+    // Each decision takes 90 % of the budget: slow, but within it.
+    let clock = SlowClock {
+        now_s: std::cell::Cell::new(0.0),
+        step_s: 0.9 * budget_ms * 1e-3,
+    };
+    let view = View::north(Enu2::zeros());
+    let mut commands = 0;
+    for k in 0..5 {
+        match t.decide(k as f64, &view, None, &clock).unwrap() {
+            Some(Decision::Command { .. }) => commands += 1,
+            other => panic!("decision {k}: {other:?}"),
+        }
+    }
+    assert_eq!(commands, 5, "a slow decision within its budget still flies");
+    assert_eq!(t.effort_level(), effort::MAX_LEVEL);
+    // Quick decisions bring the effort back, a level per run of them.
+    let quick = SlowClock {
+        now_s: std::cell::Cell::new(0.0),
+        step_s: 0.1 * budget_ms * 1e-3,
+    };
+    for k in 0..effort::QUICK_RUN {
+        t.decide(10.0 + k as f64, &view, None, &quick).unwrap();
+    }
+    assert_eq!(t.effort_level(), effort::MAX_LEVEL - 1);
+    // Without a budget (the simulator) the effort never changes.
+    let mut sim = tracker(&c, GuidanceKind::Eer, false);
+    for k in 0..5 {
+        sim.decide(k as f64, &view, None, &clock).unwrap();
+    }
+    assert_eq!(sim.effort_level(), 0);
+}

@@ -40,6 +40,7 @@ mod url;
 pub use inbound::fuzz;
 use inbound::{on_message, Ids};
 pub use params::ParamList;
+pub use stream::SetpointStats;
 use stream::{
     position_target, vehicle_to_world_ned, world_to_vehicle_ned, StreamedTarget, Streamer,
 };
@@ -412,6 +413,7 @@ impl VehicleLink {
             geofence_enu: cfg.geofence_enu,
             paused: AtomicBool::new(false),
             placement: Mutex::new(None),
+            sent: Mutex::new(SetpointStats::default()),
         });
 
         let me = (cfg.system_id, cfg.component_id);
@@ -699,6 +701,11 @@ impl VehicleLink {
                 tracing::warn!("telemetry log: {e}");
             }
         }
+    }
+
+    /// How the setpoint stream went so far.
+    pub fn setpoint_stats(&self) -> SetpointStats {
+        *self.streamer.sent.lock()
     }
 
     /// Pauses or resumes the setpoint stream (tests; a stalled companion).

@@ -10,6 +10,32 @@ pub(super) struct Streamer {
     pub(super) geofence_enu: Option<BoundsEnu>,
     /// Where the vehicle's local frame lies in the world's; None: they are the same frame.
     pub(super) placement: Mutex<Option<WorldPlacement>>,
+    /// How the stream went: setpoints sent, and when the first and the last went.
+    pub(super) sent: Mutex<SetpointStats>,
+}
+
+/// How the setpoint stream went: what a companion's CPU budget is judged by (an autopilot
+/// leaves offboard or guided control when setpoints stop coming).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SetpointStats {
+    /// Setpoints sent.
+    pub sent: u64,
+    /// When the first and the last were sent.
+    pub span: Option<(Instant, Instant)>,
+}
+
+impl SetpointStats {
+    /// Setpoints per second between the first and the last (`None` before two).
+    pub fn rate_hz(&self) -> Option<f64> {
+        let (first, last) = self.span?;
+        let s = (last - first).as_secs_f64();
+        (self.sent >= 2 && s > 0.0).then(|| (self.sent - 1) as f64 / s)
+    }
+
+    pub(super) fn note(&mut self, now: Instant) {
+        self.sent += 1;
+        self.span = Some((self.span.map_or(now, |(first, _)| first), now));
+    }
 }
 
 impl Streamer {

@@ -107,7 +107,9 @@ pub(super) fn spawn_streamer(
                 target_sp.yaw_ned,
                 start.elapsed().as_millis() as u32,
             );
-            let _ = conn.send(&header, &m).await;
+            if conn.send(&header, &m).await.is_ok() {
+                streamer.sent.lock().note(Instant::now());
+            }
         }
     })
 }
