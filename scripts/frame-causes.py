@@ -13,8 +13,7 @@ runNNN.csv) and sorts every filter step of every run into one cause, the first t
   est_30_100     the estimate 30-100 m off
   est_gt100      the estimate more than 100 m off: the target lost
 
-and prints one row of percentages (of all steps) per directory. BENCHMARKS.md "Field scale,
-part 35" reads the field worlds with it.
+and prints one row of percentages (of all steps) per directory. BENCHMARKS.md reads the field worlds with it.
 
 Usage: python3 scripts/frame-causes.py D [D ...]
 """

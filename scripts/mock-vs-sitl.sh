@@ -2,7 +2,7 @@
 # mock-vs-sitl.sh [FLIGHTS]: the same lab flight (config/default.toml, its seed, 60 s of
 # tracking, wall clock) flown FLIGHTS times (default 5) on each SITL build in ../shared/sitl
 # and on the in-process mock of the same flavour with daemon.mock_response = "sitl"; prints
-# one line per flight and the means (issue 13: the mock should predict what the SITL flies
+# one line per flight and the means (the mock should predict what the SITL flies
 # within 10 points of FOV and 30 % of tracking error). Takes ~2 min per flight pair.
 set -euo pipefail
 cd "$(dirname "$0")/.."

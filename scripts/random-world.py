@@ -4,7 +4,7 @@
     python3 scripts/random-world.py SEED [TWO_WAY_SHARE] [--orientation robbins|random] > world.toml
     infotrack sim --config world.toml --runs 10 --guidance eer --motion cv
 
-Issue 12's last target is measured on a field world we have not seen, written in the config
+The field-scale targets are measured on a field world we have not seen, written in the config
 schema plus `[acquisition]`. The hand-made stand-ins (config/field-*.toml) were each written
 to hold one difficulty; this draws the world itself from a seed so that a batch over seeds is
 a sample of worlds, not a choice: a jittered grid of junctions 350-550 m apart, a fifth of
@@ -13,7 +13,7 @@ TWO_WAY_SHARE (default 0.5; a two-way street lets the car turn back at its junct
 the schema's turn probabilities belong to the node), the one-way streets oriented so that
 every junction reaches every other (`robbins`, the default: a depth-first orientation, a
 street that is the only link between two parts two-way; `random`: each drawn at random, then
-made two-way until every junction reaches every other, the first draw of BENCHMARKS part 42),
+made two-way until every junction reaches every other, the first draw of BENCHMARKS.md),
 turn probabilities drawn per junction, a car at 10-15 m/s, a drone at 45-60 m with a 1280 or
 1920 px camera, 1-1.5 m tag, one covered junction and one tree line along a street, the
 operator's cue within 50 m of the car's start. The filter and guidance sections are the
@@ -117,7 +117,7 @@ def draw_graph(rng, two_way_share, orientation):
 
 
 def randomly_oriented(n, streets, two_way_share, rng):
-    """Session 45's first draw (worlds 1-8 of BENCHMARKS part 42): each street two-way with
+    """The first draw (worlds 1-8 of BENCHMARKS.md): each street two-way with
     probability `two_way_share`, else one way at random; then one-way streets made two-way,
     in random order, until every junction reaches every other (so even a share of 0 leaves
     many streets two-way)."""
@@ -165,7 +165,7 @@ def main():
     parser.add_argument("two_way_share", type=float, nargs="?", default=0.5)
     parser.add_argument("--orientation", choices=["robbins", "random"], default="robbins",
                         help="how one-way streets get their direction (default robbins; "
-                        "random: the first draw, worlds 1-8 of BENCHMARKS part 42)")
+                        "random: the first draw, worlds 1-8 of BENCHMARKS.md)")
     args = parser.parse_args()
     if not 0.0 <= args.two_way_share <= 1.0:
         parser.error(f"two_way_share must lie in [0, 1], got {args.two_way_share}")

@@ -6,9 +6,9 @@
         [--duration SECONDS] [--key SECTION.KEY=VALUE ...] [--scale SECTION.KEY=FACTOR ...]
     python3 scripts/world-batch.py compare DIR_A DIR_B
 
-Issue 12's last target (EER keeps the target in view >= 60 % of the time with a mean
+The field-scale target (EER keeps the target in view >= 60 % of the time with a mean
 tracking error <= 20 m, on a field world we have not seen, `--motion cv`) is estimated since
-BENCHMARKS.md part 42 on two sets of worlds:
+BENCHMARKS.md on two sets of worlds:
 
 * `random`: sixteen worlds drawn by `scripts/random-world.py` (seeds 1-8 with two-way share
   0.5 and `--orientation random`, seeds 11-18 with one-way streets), written to DIR/worlds;
@@ -19,7 +19,7 @@ BENCHMARKS.md part 42 on two sets of worlds:
 not depend on how many run beside it), each on the world's own seed or on `--seed`. It
 writes DIR/summary.json (the figures per world, with each run's) and prints a table: per
 world the mean %FOV and tracking error, how many runs never saw the target and the tracking
-error after the first sighting (the search apart from the tracking; BENCHMARKS.md part 63),
+error after the first sighting (the search apart from the tracking; BENCHMARKS.md),
 then the mean %FOV over the set and on how many worlds both targets hold.
 
 `--key guidance.view_heading='"informed"'` (repeatable; the value is written as TOML, so a
@@ -29,14 +29,14 @@ key the world already sets is refused, so a variant never silently replaces a wo
 
 `--scale agent.accel_limit_mps2=2` (repeatable) multiplies a number every world sets by the
 factor, in a copy written to DIR/worlds: a diagnostic of what a world's own setting decides
-(BENCHMARKS.md part 65 doubled the drone's acceleration by hand), not a variant of the
+(BENCHMARKS.md doubled the drone's acceleration by hand), not a variant of the
 product. A world that does not set the key, or sets it to something other than one number,
 is refused, naming the world.
 
 `compare` pairs two summaries world by world (a change measured against its base, both run
 with the same seed): the %FOV difference's mean and paired t statistic, and the worlds on
 which both targets hold in each. With 10 runs a single world's mean FOV moves by 4-13 points
-from noise alone (BENCHMARKS.md part 58), so judge a change by the paired figures over a set,
+from noise alone (BENCHMARKS.md), so judge a change by the paired figures over a set,
 and on more than one seed.
 """
 
@@ -50,12 +50,12 @@ import sys
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
-# The sixteen random worlds of BENCHMARKS.md part 42: (name, random-world.py arguments).
+# The sixteen random worlds of BENCHMARKS.md: (name, random-world.py arguments).
 RANDOM_WORLDS = [(f"random-{s}", [str(s), "0.5", "--orientation", "random"]) for s in range(1, 9)] + [
     (f"random-{s}", [str(s), "0"]) for s in range(11, 19)
 ]
 
-# Issue 12's targets for a field world.
+# The field-scale targets for a field world.
 FOV_TARGET_PERCENT = 60.0
 TRACKING_TARGET_M = 20.0
 
@@ -204,7 +204,7 @@ def fly(binary, name, config, json_path, args):
         "per_run_fov_percent": [r["fov_percent"] for r in row["per_run"]],
         "per_run_tracking_error_m": [r["tracking_error_m"] for r in row["per_run"]],
     }
-    # The search apart from the tracking, from binaries that write it (since session 65).
+    # The search apart from the tracking, from binaries that write it.
     if all("first_sighting_s" in r for r in row["per_run"]):
         summary["per_run_first_sighting_s"] = [r["first_sighting_s"] for r in row["per_run"]]
         summary["per_run_tracking_error_after_first_sighting_m"] = [

@@ -106,7 +106,7 @@ use cli::{calibrate, detect, load_config, run_cmd, runtime};
 /// every frame. The renderer and the AprilTag detector allocate and free ~10 MB of image
 /// buffers per frame; glibc's defaults return them (munmap, or trimming a thread's arena)
 /// and the next frame faults every page in again, zeroed: ~2,500 page faults per frame,
-/// a fifth of the simulated-clock closed loop's CPU time (issue 16, BENCHMARKS.md). The
+/// a fifth of the simulated-clock closed loop's CPU time (BENCHMARKS.md). The
 /// cost is that the resident size stays at its peak, which a daemon reaches in its first
 /// frames anyway. Only the allocator's thresholds change; what is computed is identical.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]

@@ -71,7 +71,7 @@ fn check_flight(r: &daemon::DaemonReport) {
     assert!(s.tracking_error_m.is_finite() && s.estimation_error_m.is_finite());
     assert!(s.cov_det.is_finite() && s.cov_det > 0.0);
     // The issue asks for the target in view at least half the time. Over seeds 1-16 the
-    // closed loop gives 46-64 % (mean 58.5 %, session 30); seed 7, the config's, 60.2 %.
+    // closed loop gives 46-64 % (mean 58.5 %); seed 7, the config's, 60.2 %.
     assert!(
         s.fov_percent >= 50.0,
         "target in view {:.1}% of the time",
@@ -115,8 +115,8 @@ fn px4_closed_loop_through_the_mock_matches_the_simulator() {
     let setpoints = count(|m| matches!(m, MavMessage::SET_POSITION_TARGET_LOCAL_NED(_)));
     assert!(setpoints as f64 >= 10.0 * 90.0, "{setpoints} setpoints");
     // Every setpoint holds the heading the tracker's footprint is drawn for: the nose north
-    // (NED yaw 0), the image's width along world east. Yaw ENU 0 (the nose east, sent
-    // before session 48) turned a real camera's view across the model's.
+    // (NED yaw 0), the image's width along world east. Yaw ENU 0 (the nose east) would
+    // turn a real camera's view across the model's.
     let yaws_in = |yaw_of: fn(&MavMessage) -> Option<f32>| -> Vec<f32> {
         msgs.iter().filter_map(|(_, _, m)| yaw_of(m)).collect()
     };
@@ -289,7 +289,7 @@ fn replays_exactly(cfg: &Config, r: &daemon::DaemonReport) {
 /// constant-velocity filter. The issue's target is the car in view >= 60 % of the time with
 /// tracking error <= 20 m; seeds 1-3 over the full 300 s gave 74-85 % and 11-18 m, this
 /// seed over 120 s 83 % and 11 m (82.7 % and 7.9 m since the road constraint reads the
-/// tracks' headings, session 15).
+/// tracks' headings).
 #[test]
 fn outdoor_closed_loop_keeps_the_car_in_view() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/outdoor.toml");

@@ -1,4 +1,4 @@
-//! The fault table of issue 15, row by row, against the real `infotrack` binary: each test
+//! The fault table (README, "Faults and refusals"), row by row, against the real `infotrack` binary: each test
 //! injects one fault a careful user or a hostile network produces and checks the outcome
 //! the user needs (a clear error naming the cause, the flight going on, nothing addressed
 //! to another vehicle). Rows whose test lives beside the feature it checks are named in

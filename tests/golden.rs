@@ -3,26 +3,11 @@
 //! by today's binary. Per-run metrics must agree to 1e-9 (the simulated runs are
 //! deterministic for their seed, so in practice they agree to the last bit).
 //!
-//! Re-recorded once on purpose, by `scripts/record-golden.py`: when the DMMN files became
-//! the batch-last graph (issue 16), whose outputs differ from the old graph's by float32
-//! rounding (< 1e-6 m). The CV and KF rows did not move; the DMMN rows' errors moved by at
-//! most 0.024 m, where a rounding-level difference flips one EER decision and the run goes
-//! another way (most moved by under 1e-6). Re-recorded a second time on purpose in session 12,
-//! when EER began to fly a waypoint beyond one horizon's reach at top speed with the velocity
-//! as feed-forward (BENCHMARKS "Field scale, part 6"): a new behaviour, so EER rows moved (lab
-//! Monte Carlo runs by up to 11 points of FOV either way; the 30 s closed-loop seed 3 from
-//! 30.3 % to 12.4 %); the CV/KF/PFWM rows that do not plan with EER did not move. A third
-//! time in session 13, when that transit was restricted to waypoints beyond the reachable
-//! grid's corners (sqrt(2) x reach; BENCHMARKS "Field scale, part 7"): the lab's EER rows
-//! went back to what they were before session 12 in most runs (the 30 s closed-loop seed 3
-//! from 12.4 % to 30.3 %; largest change 17.98 points there, 11.1 in the Monte Carlo rows). A
-//! fourth time in session 36, when the re-spread began to repeat while the target stays
-//! unseen (BENCHMARKS "Field scale, part 33"): only two KF-guidance rows of the Monte Carlo,
-//! whose particle filter loses the lab target for long, moved (estimation error by at most
-//! 0.008 m); no EER row, closed-loop or vision run moved. A fifth time in session 50, when a
-//! target last measured below half its cruising speed stopped giving the re-spread a heading
-//! (BENCHMARKS "Field scale, part 48"): again only KF-guidance rows moved (three runs'
-//! estimation error, by at most 0.045 m); no EER row, closed-loop or vision run moved.
+//! The fixtures are re-recorded on purpose, by `scripts/record-golden.py`, only when a
+//! change of behaviour is meant (the commit that does it says which rows moved and why): a
+//! new DMMN graph whose outputs differ by float32 rounding, a new EER transit, a belief
+//! re-spread that repeats. Rows a change does not touch must not move; git's history of
+//! `tests/fixtures/golden/` holds each re-recording.
 
 use std::path::Path;
 use std::process::Command;

@@ -465,7 +465,7 @@ fn sim_as_the_batch_does(
 
 /// `scripts/world-batch.py` flies every stand-in through `sim --json` and keeps its figures:
 /// a world's row is what `infotrack sim` run by hand with the same arguments reports, the
-/// table counts the worlds that meet both of issue 12's targets, a measurement compared
+/// table counts the worlds that meet both field-scale targets, a measurement compared
 /// with itself differs by nothing, and a missing binary is named.
 #[test]
 fn world_batch_measures_the_stand_ins_as_sim_does() {

@@ -409,7 +409,7 @@ const HOLD_MAX_DESCENT_M: f64 = 0.5;
 
 /// The most a hold may climb over the watch. PX4 SIH's AUTO.LOITER climbs after OFFBOARD
 /// by itself: +0.16 to +0.31 m in 10 s in the four recorded probe flights (BENCHMARKS "The
-/// mock calibrated against SITL"), +0.53 m in one CI flight (session 40, 1.09 -> 1.62 m);
+/// mock calibrated against SITL"), +0.53 m in one CI flight (1.09 -> 1.62 m);
 /// a climb is not the fault above, so its bar only catches a hold that flies away.
 const HOLD_MAX_CLIMB_M: f64 = 1.0;
 
@@ -536,7 +536,7 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     let rate = setpoint_rate_hz(&f);
     assert!((15.0..=25.0).contains(&rate), "setpoints at {rate:.1} Hz");
     // PX4's position loop at the lab's 1.2 m is loose (it hunts by ~0.2-0.5 m): the target
-    // is in view about a third of the time (issue 13's 50 % is not met on PX4 yet). Single
+    // is in view about a third of the time (the 50 % target is not met on PX4 yet). Single
     // wall-clock flights spread widely: 30.8 +- 9.0 % over five flights without a cut
     // (BENCHMARKS), 17.9-48 % with it, and 11.7 % on a slower CI machine (estimation
     // 0.44 m: tracking, loosely). So the bars say that tracking works at all. In view: more
@@ -546,14 +546,11 @@ async fn px4_sih_flies_the_lab_survives_a_link_cut_and_holds_after_the_flight() 
     // this flight's target drives: 6.7 % and 3.3 %, the target's centre in the view).
     // Estimate: within 0.7 m of the target (0.11-0.45 m on PX4 SIH over seven flights); an
     // estimate that stayed at the lab's centre would be 1.04 m off on average, the target
-    // circling the lab. Until session 30 a miss of a tag
-    // cut by the image's edge (PX4 hunts, so the target sits near the edge often) erased
-    // the true hypothesis: 0.6 % / 0.91 m in one CI flight, 10 % / 0.83 m in one of four
-    // here. Since the filter and EER count only whole tags: 27.8-37.8 %, 0.11-0.15 m over
-    // five flights with the cut (BENCHMARKS.md "Whole tags"); two CI runs in session 31:
-    // 33.3 % / 0.10 m and 21.7 % / 0.36 m; session 32's CI run 8.4 % / 0.56 m (its first
-    // sighting late in the flight) and three flights after it 16.8-28.3 %, 0.19-0.47 m;
-    // session 33 made the flight 90 s after a 60 s CI flight at 7.3 % / 0.77 m.
+    // circling the lab. A miss of a tag cut by the image's edge (PX4 hunts, so the target
+    // sits near the edge often) would erase the true hypothesis (0.6 % / 0.91 m in one CI
+    // flight); the filter and EER count only whole tags: 27.8-37.8 %, 0.11-0.15 m over five
+    // flights (BENCHMARKS.md "Whole tags"), 8.4-33.3 % and 0.10-0.56 m in CI runs; the
+    // flight lasts 90 s, as a 60 s CI flight saw the tag only 7.3 % of the time.
     assert!(fov(&f) >= 8.0, "{}", explain(&f));
     let estimation_m = f.summary["estimation_error_m"].as_f64().unwrap();
     assert!(estimation_m <= 0.7, "{}", explain(&f));
@@ -593,7 +590,7 @@ async fn arducopter_flies_the_lab_and_brakes_after_the_flight() {
     let rate = setpoint_rate_hz(&f);
     assert!((15.0..=25.0).contains(&rate), "setpoints at {rate:.1} Hz");
     // One wall-clock flight varies a lot (61.9, 61.5 and 41.1 % seen): the bar is that
-    // tracking works, not issue 13's 50 % (the mean over several flights is the measure).
+    // tracking works, not the 50 % target (the mean over several flights is the measure).
     assert!(fov(&f) >= 25.0, "{}", explain(&f));
     // BRAKE holds the altitude with no RC (LOITER would descend to the ground).
     assert_held(
@@ -610,7 +607,7 @@ async fn arducopter_flies_the_field_world() {
     // camera and a 1.2 m roof tag), found from the operator's cue: what field operators
     // fly, on a copter that carries the shipped parameter file from boot (WPNAV_SPEED
     // 15 m/s, ANGLE_MAX 45 degrees: at the default 30 degrees it holds 10.3 m/s and never
-    // catches the car, 0 of ~270 frames in six flights of session 11).
+    // catches the car, 0 of ~270 frames in six flights).
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("firmware-params/ardupilot-guided-tracking.parm");
     let _ac = start_with("arducopter/start.sh", &["2", "serial0=tcp:0"], &[&shipped]);
@@ -625,8 +622,8 @@ async fn arducopter_flies_the_field_world() {
     );
     assert!(f.stdout.contains("ardupilot vehicle"), "{}", f.stdout);
     // No failsafe or other mode change once armed. ArduCopter resets the GUIDED set during
-    // its start-up to STABILIZE; that is reported apart, as before arming (session 14: it
-    // was reported as "GUIDED -> STABILIZED, a failsafe, the pilot or a GCS").
+    // its start-up to STABILIZE; that is reported apart, as before arming (it would
+    // otherwise read as "GUIDED -> STABILIZED, a failsafe, the pilot or a GCS").
     assert!(
         f.stdout
             .contains("no mode change that infotrack did not command"),
@@ -714,7 +711,7 @@ async fn gcs_through_the_autopilot(url: &'static str, heard: Arc<Mutex<Vec<MavMe
     beat.abort();
 }
 
-/// Issue 14: the GCS sees the tracker through a router. What the GCS heard of infotrack: its
+/// The GCS sees the tracker through a router. What the GCS heard of infotrack: its
 /// STATUSTEXTs (tracking started, acquired, the stop), the ~1 Hz NAMED_VALUE_FLOATs and the
 /// estimate as ADSB_VEHICLE `TARGET`.
 fn assert_gcs_heard_the_tracker(heard: &[MavMessage]) {
@@ -907,12 +904,12 @@ fn against_recording(now: &probe::Response, name: &str) -> Result<(), String> {
     }
     let flights = probe::recorded(name);
     // PX4 SIH's recordings understate its spread when flown in CI under the suite's load
-    // (session 11, three CI runs): step overshoot 0.149-0.230 m (recorded 0.24-0.33),
+    // (three CI runs): step overshoot 0.149-0.230 m (recorded 0.24-0.33),
     // ramp lag 0.569-0.687 m (recorded 0.40-0.48), hover RMS 0.206-0.352 m (recorded
     // 0.33-0.45). Floors for those three figures; the others keep their margins. Hold
-    // drift too (sessions 18-19, three fresh-clone CI flights: 0.164-0.210 m, recorded
+    // drift too (three fresh-clone CI flights: 0.164-0.210 m, recorded
     // 0.38-0.53 m): it holds its position better than recorded on some boots. Step rise too
-    // (sessions 18-19 and 51: 4.15 s and 4.14 s on both flights of one fresh-clone CI run,
+    // (4.15 s and 4.14 s on both flights of one fresh-clone CI run,
     // 4.64 s standalone, 2.11-3.29 s on reruns of the same commits, recorded 2.09-2.89 s):
     // SIH on the wall clock rises slower when the machine is busy, flight after flight, so
     // the second flight does not rescue it; a 2 s floor keeps 0.1-4.9 s, still failing a
@@ -941,7 +938,7 @@ fn against_recording(now: &probe::Response, name: &str) -> Result<(), String> {
 #[ignore = "needs the SITL builds: run by scripts/sitl-test.sh"]
 async fn px4_sih_answers_the_probe_as_recorded() {
     // PX4 SIH flies on the wall clock and one flight's figures spread wider than its eight
-    // recordings (session 18's fresh-clone run, on an idle machine: step rise 4.6 s against
+    // recordings (a fresh-clone run on an idle machine: step rise 4.6 s against
     // the recorded 2.1-2.9 s, hold drift 0.17 m against 0.38-0.53 m, hover RMS 0.51 m against
     // 0.21-0.45 m, while the lab flight of the same run tracked at 32.4 %). A firmware that
     // answers unlike its recordings does so flight after flight: a second flight from a

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Counts the floating-point operations of one DMMN inference (issue 16: the model's cost
+"""Counts the floating-point operations of one DMMN inference (the model's cost
 as a fraction of what the core can do).
 
 Walks the exported ONNX graph with shapes inferred for a given batch and counts, per node:

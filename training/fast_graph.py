@@ -4,7 +4,7 @@
 Why: the model is tiny (width 5, 4 heads of size 1, 10 time steps) and a batch is large
 (500-5,000 particles). Exported as PyTorch writes it, batch-first, every element-wise op,
 LayerNorm and softmax in the graph runs over inner dimensions of 2-10 elements, and ONNX
-Runtime spends its time in per-row loops instead of arithmetic (issue 16: 3.2 ms per batch
+Runtime spends its time in per-row loops instead of arithmetic (3.2 ms per batch
 of 500 where the arithmetic needs ~0.15 ms). Here every tensor keeps the batch as its last,
 contiguous axis: positions are `[d, K, B]`, attention weights `[heads, K, K, B]`, linear
 layers are one GEMM over `[d, K*B]`, LayerNorm and softmax reduce over a leading axis. The

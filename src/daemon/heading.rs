@@ -5,8 +5,8 @@
 //! (`daemon.camera_mount_rpy_rad`) faces the nose's heading plus psi
 //! ([`view_yaw_enu_of_nose`], how the daemon reads every frame's view from ATTITUDE); to
 //! face a view, the nose flies it less psi ([`nose_yaw_enu_for_view`], what every setpoint
-//! carries). Until session 48 every setpoint carried yaw ENU 0 (the nose east) while the
-//! model held the view north: on a real vehicle the image lay across the model and a missed
+//! carries). A setpoint that carried yaw ENU 0 (the nose east) while the model held the view
+//! north would be wrong: on a real vehicle the image lay across the model and a missed
 //! detection removed hypotheses the camera had not looked at (the synthetic camera rendered
 //! at the model's heading, so no simulation showed it).
 

@@ -70,7 +70,7 @@ pub struct MockConfig {
     pub seed: u64,
 }
 
-/// ArduCopter SITL said "ArduPilot Ready" 2.2 s after its first heartbeat (session 14).
+/// ArduCopter SITL said "ArduPilot Ready" 2.2 s after its first heartbeat.
 const ARDUCOPTER_SITL_STARTUP_S: f64 = 2.2;
 
 impl MockConfig {
@@ -449,7 +449,7 @@ impl MockAutopilot {
             }
             // ArduPilot GCS failsafe: only once a GCS has been heard. ArduCopter SITL with
             // FS_GCS_ENABLE = 1 from boot and no GCS flew GUIDED for 90 s without it (the
-            // field flight, session 12); a companion-only flight is not a lost GCS.
+            // field flight); a companion-only flight is not a lost GCS.
             let fs = self.params.get("FS_GCS_ENABLE", 0.0) as i64;
             if self.cfg.flavor == Flavor::ArduPilot && fs != 0 && !self.gcs_failsafe {
                 let timeout = self.params.get("FS_GCS_TIMEOUT", 5.0);

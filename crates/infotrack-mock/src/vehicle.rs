@@ -107,7 +107,7 @@ impl Response {
         spool_up_s: 2.3,
         takeoff_climb_mps: 0.3,
         // Fitted over 21 seeds of the probe (BENCHMARKS "The mock calibrated against
-        // SITL") and, since session 33, to the lab flight too: 0.35 m and 5 s put the
+        // SITL") and to the lab flight too: 0.35 m and 5 s put the
         // median hover RMS, overshoot, lags and hold drift inside PX4 SIH's recorded
         // ranges (0.25 m / 2.5 s left the overshoot at 0.19 m), but the lab's closed loop
         // on this mock then saw the target half as often as PX4 SIH's lab flights (15.5 %

@@ -68,13 +68,12 @@ fn straighten(histories: &mut Histories, i: usize, newest: &Enu2, v_step: &Enu2)
 /// now and after its step, is put on the one piece ahead.
 /// True when the track was re-routed.
 ///
-/// Before session 46 the turn back was never drawn where another way on was in reach: the
-/// belief went on while the car turned back, and was lost for good where it did (random-11,
-/// random-2: BENCHMARKS.md "Field scale, part 43"; parts 26 and 30 measured the same change
-/// on older mains, level or worse, before the searching and road-placement rules of parts
-/// 27-38). It costs field-ring 8.5 points: where the car turns back under an occlusion the
+/// Never drawing the turn back where another way on is in reach, the belief went on while
+/// the car turned back, and was lost for good where it did (random-11, random-2:
+/// BENCHMARKS.md; without the searching and road-placement rules the same change measured
+/// level or worse). It costs field-ring 8.5 points: where the car turns back under an occlusion the
 /// belief now splits between its exits, and EER's search chooses between them worse than the
-/// re-spread corrected the old, wrong belief (part 43).
+/// re-spread corrected the old, wrong belief (BENCHMARKS.md).
 pub fn reroute_track<R: Rng + ?Sized>(
     histories: &mut Histories,
     i: usize,
@@ -98,7 +97,7 @@ pub fn reroute_track<R: Rng + ?Sized>(
 /// is (its 99th percentile off the centre line is 10.5-13.2 m against 11.1 m). With 1 (put
 /// back from half a sigma) the belief lost its spread across the road: outdoors the tracking
 /// error rose from 7.5 to 10.6 m and, flying to the true car, the estimate's from 3.44 to
-/// 4.20 m (BENCHMARKS.md "Field scale, part 59").
+/// 4.20 m (BENCHMARKS.md).
 pub const STRAY_ON_ROAD_TOLERANCES: f64 = 6.0;
 
 /// The slowest share of its speed a track keeps when it turns back ([`slow_a_turn_back`]).
@@ -109,7 +108,7 @@ pub const TURN_BACK_MIN_SPEED_SHARE: f64 = 0.4;
 /// cruise speed (the simulated car stops to turn on the spot). Kept at full speed, the
 /// turned-back hypotheses came out of a covered junction seconds before the car and were seen
 /// absent there, and the belief gave the car's way up (field-eight's covered crossing;
-/// BENCHMARKS.md "Field scale, part 56"). Its newest position stays; its history is made
+/// BENCHMARKS.md). Its newest position stays; its history is made
 /// straight at the new speed.
 fn slow_a_turn_back<R: Rng + ?Sized>(
     histories: &mut Histories,
@@ -172,10 +171,10 @@ fn put_on_the_road_ahead<R: Rng + ?Sized>(
         // A dead end: the track is on its road, the road ends within the step and the only
         // way on is back. Carried straight on, the belief ran off the road's end while the
         // car turned round in it, and EER sent the drone past the end (field-twin's
-        // warehouse; BENCHMARKS.md "Field scale, part 27"). A track already off the road, or
+        // warehouse; BENCHMARKS.md). A track already off the road, or
         // at a junction whose other roads lie outside the step, is no dead end: told by the
-        // graph, not by the pieces in reach (session 28's first rule turned tracks back at
-        // field-ring's corners).
+        // graph, not by the pieces in reach (judged by the pieces in reach, tracks turned back
+        // at field-ring's corners).
         if off_road_m <= on_road_m && world.road.heads_into_a_dead_end(&p, Some(v)) {
             let back = in_reach.split_reversals(&v).1;
             return straight_track_on_roads(histories, i, &back, speed..=speed, dt_s, rng);
@@ -189,7 +188,7 @@ fn put_on_the_road_ahead<R: Rng + ?Sized>(
     // that piece rather than counted as following its road: carried straight on it ran off
     // across the map, and EER's rollout, which has no road constraint to weigh it down,
     // judged the drone's candidates by hypotheses where no car can be (30-48 % of a 20 s
-    // rollout near random-4's node 6; BENCHMARKS.md "Field scale, parts 58 and 59").
+    // rollout near random-4's node 6; BENCHMARKS.md).
     let stray_m = STRAY_ON_ROAD_TOLERANCES * on_road_m;
     let strays_off_the_roads = off_road_m.is_some_and(|d| d > stray_m && step_off_road_m > stray_m);
     let follows_its_road = (pieces < 2 && !strays_off_the_roads) || (pieces == 2 && step_on_road);

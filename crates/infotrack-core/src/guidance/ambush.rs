@@ -14,7 +14,7 @@
 //! apart) scores the share of them that pass within the view's inscribed radius of it, not
 //! under an occlusion, in the `window_s` after the drone can be there, divided by that
 //! flight plus the wait: a rate, so that a far point is worth its flight (a window from now
-//! instead kept the drone at the nearest hub for minutes, BENCHMARKS.md part 68). Pure and
+//! instead kept the drone at the nearest hub for minutes, BENCHMARKS.md). Pure and
 //! seeded.
 
 use rand::Rng;
@@ -23,13 +23,12 @@ use crate::world::geometry::Enu2;
 use crate::world::World;
 
 /// `guidance.ambush_window_s` when a config leaves it out, s: how long a waiting point is
-/// judged over once the drone is there (the one value measured, BENCHMARKS.md "Field scale,
-/// part 68").
+/// judged over once the drone is there (the one value measured, BENCHMARKS.md).
 pub const DEFAULT_AMBUSH_WINDOW_S: f64 = 30.0;
 
 /// How long the target must have been unseen (since the start, or since its last
 /// measurement) before the drone waits for it, s. Before it EER's search decides: at 20 s
-/// the ambush took random-1's drone off the branch the car was on (BENCHMARKS.md part 68).
+/// the ambush took random-1's drone off the branch the car was on (BENCHMARKS.md).
 pub const AMBUSH_AFTER_S: f64 = 40.0;
 
 /// The ambush's parameters.

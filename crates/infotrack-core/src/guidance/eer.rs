@@ -53,12 +53,12 @@ use crate::world::measurement::Gaussian2;
 use crate::world::World;
 
 /// `search_commitment` when a config leaves `guidance.search_commitment` out: the share
-/// session 22 first measured (outdoors level with the argmax) and session 27 measured on
-/// every world (BENCHMARKS.md "Field scale, part 26"); not tuned per world.
+/// measured first outdoors (level with the argmax) and then on
+/// every world (BENCHMARKS.md); not tuned per world.
 pub const DEFAULT_SEARCH_COMMITMENT: f64 = 0.2;
 
 /// `centring_share` when a config leaves `guidance.centring_share` out ([`Centring`]):
-/// measured on the seven field worlds and the lab (BENCHMARKS.md "Field scale, part 40");
+/// measured on the seven field worlds and the lab (BENCHMARKS.md);
 /// not tuned per world.
 pub const DEFAULT_CENTRING_SHARE: f64 = 0.02;
 
@@ -251,7 +251,7 @@ pub fn intercept_lead_s(
 /// car at 10 m/s, 200 m away, is 130 m further when a 15 m/s drone arrives). The planner
 /// uses them only once the target has been seen ([`EerPlanner::use_intercepts`]): the
 /// intercepts of a cue's belief, spread both ways along the roads, pull the search back and
-/// forth (BENCHMARKS "Field scale, parts 15-16").
+/// forth (BENCHMARKS.md).
 #[allow(clippy::too_many_arguments)]
 pub fn intercepts(
     inputs: &EerInputs,
@@ -293,8 +293,7 @@ const LEAD_STEP_S: f64 = 0.5;
 /// a world without roads. Carried
 /// straight on, a track that is about to turn or that drives into a dead end leaves the
 /// road, and its intercept lay where no car can be: on field-hill the drone flew 120 m past
-/// the spur's dead end while the car turned round in it, and lost it (BENCHMARKS.md "Field
-/// scale, part 25"). Cut at the road's end, the intercept is where the hypothesis can be
+/// the spur's dead end while the car turned round in it, and lost it (BENCHMARKS.md). Cut at the road's end, the intercept is where the hypothesis can be
 /// last seen on its road.
 fn lead_on_the_roads(
     inputs: &EerInputs,
@@ -582,7 +581,7 @@ pub fn evaluate_reference_led(
 /// once). Then EER's choice is where to put the footprint over one compact cluster, which
 /// fewer hypotheses can show at a fraction of the cost; a spread or split belief (searching,
 /// after an occluded junction) keeps `entropy_particles`, where every hypothesis paid
-/// (BENCHMARKS "Field scale, part 8").
+/// (BENCHMARKS.md).
 pub fn belief_is_concentrated(pf: &ParticleFilter, world: &World) -> bool {
     let cov = pf.covariance();
     let fp = &world.footprint;

@@ -17,7 +17,7 @@ pub struct GuidanceConfig {
     /// most a quarter of the camera footprint's width along it, so +-2 sigma is in view at
     /// once), at a fraction of the O(N_H^2) cost. Outdoors 300 of 1000 matched every
     /// hypothesis in the Monte Carlo runs but tracked worse in the closed loop (BENCHMARKS
-    /// "Field scale, part 8"): the shipped configs leave it unset. Optional; absent,
+    /// BENCHMARKS.md): the shipped configs leave it unset. Optional; absent,
     /// `entropy_particles` always.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub entropy_particles_concentrated: Option<usize>,
@@ -35,17 +35,16 @@ pub struct GuidanceConfig {
     /// speed, meets it carried on at its own velocity, looked ahead by at most this long (and
     /// EER judges what a far candidate sees at that time). Before the first detection the
     /// paper's candidate (the particle where it is at the horizon's end). Optional; absent,
-    /// the paper's candidates always (the field configs set 10 s: BENCHMARKS "Field scale,
-    /// part 16").
+    /// the paper's candidates always (the field configs set 10 s: BENCHMARKS.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub intercept_within_s: Option<f64>,
-    /// Commitment while searching (before the first sighting; after a loss, since part 56,
-    /// the argmax decides), a share of the EER range in [0, 1]:
+    /// Commitment while searching (before the first sighting; after a loss the argmax
+    /// decides), a share of the EER range in [0, 1]:
     /// of the candidates whose EER is within this share of the range below the best, the plan
     /// keeps to the one nearest its previous waypoint, so the drone flies to one mode of a
     /// spread belief instead of back and forth between them (a departure from the paper's
-    /// argmax; BENCHMARKS "Field scale, parts 26-27"). Once the drone sees its previous
-    /// waypoint it has got there, and the argmax decides again (part 55). Tracking, the
+    /// argmax; BENCHMARKS.md). Once the drone sees its previous
+    /// waypoint it has got there, and the argmax decides again (BENCHMARKS.md). Tracking, the
     /// argmax. Optional; absent,
     /// 0.2; 0 with `centring_share = 0` restores the paper's argmax always (exact ties broken
     /// toward the belief's mean).
@@ -56,7 +55,7 @@ pub struct GuidanceConfig {
     /// candidates whose EER is within this share of the range below the best, the plan takes
     /// the one nearest the belief's predicted mean, so the view is centred on the target
     /// rather than anywhere that holds it (a choice among nearly equal maxima of the paper's
-    /// argmax; BENCHMARKS "Field scale, part 40"). Optional; absent, 0.02; 0 breaks exact
+    /// argmax; BENCHMARKS.md). Optional; absent, 0.02; 0 breaks exact
     /// ties only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub centring_share: Option<f64>,
@@ -64,16 +63,16 @@ pub struct GuidanceConfig {
     /// multiplied by `floor + (1 - floor) x` its speed away from the drone over the fastest
     /// hypothesis's, so that the plan looks first where the belief escapes (one coming
     /// toward the drone can be looked at later); this is the floor, in [0, 1]. A departure
-    /// from the paper's weights (BENCHMARKS "Field scale, part 45"). Optional; absent, 0.3
-    /// (0.1 before session 48, part 46); 1 restores the paper's. Without a cue (the lab), never applied.
+    /// from the paper's weights (BENCHMARKS.md). Optional; absent, 0.3
+    /// (0.1 chased the belief's fastest front too hard); 1 restores the paper's. Without a cue (the lab), never applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub search_escape_floor: Option<f64>,
     /// Waiting where a long-lost target will pass: once the target has been unseen for 40 s
     /// and the belief is spread over more than two views' lengths, the drone flies to the
     /// point along the roads that the most hypotheses, driven on along the roads, pass in
     /// this many seconds after it gets there, per second of flight and wait, and waits there
-    /// (`guidance::ambush`; BENCHMARKS "Field scale, part 68"). Optional; absent, 30 s; 0:
-    /// off (EER searches, as before session 69). Without a cue (the lab), never applied.
+    /// (`guidance::ambush`; BENCHMARKS.md). Optional; absent, 30 s; 0:
+    /// off (EER searches). Without a cue (the lab), never applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambush_window_s: Option<f64>,
     /// Which way the camera's image faces: `north` (the paper's constant heading, the image's
@@ -82,10 +81,9 @@ pub struct GuidanceConfig {
     /// `agent.yaw_rate_limit_rad_s`, and EER judges each candidate at the heading the vehicle
     /// will have there) or `informed` (EER judges each candidate at the `along_track` heading
     /// and a quarter turn from it and flies the better: the long side across a covered
-    /// junction's two exits; level with `along_track` on average, BENCHMARKS "Field scale,
-    /// part 54"; other laws fly `along_track`). Optional; absent, `along_track` with an
+    /// junction's two exits; level with `along_track` on average, BENCHMARKS.md; other laws fly `along_track`). Optional; absent, `along_track` with an
     /// `[acquisition]` cue (a field flight: the outdoor closed loop seeds 1-3 kept the car in
-    /// view 80-81 % of the frames instead of 73-80 %, BENCHMARKS "Field scale, part 47") and
+    /// view 80-81 % of the frames instead of 73-80 %, BENCHMARKS.md) and
     /// `north` without one (the paper's lab, whose numbers stay the paper's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub view_heading: Option<crate::guidance::ViewHeading>,

@@ -5,8 +5,7 @@
 //! is a rectangle (58 x 31 m from 45 m with the field configs' 1280x720 camera), and a
 //! road-bound belief is a line along a road: with the view's long side along the way the
 //! vehicle flies (`along_track`; chasing a car, along its road) the view holds up to 58 m of
-//! the road instead of 31 m when the road runs north-south. Measured (BENCHMARKS.md "Field
-//! scale, part 47"): level on average, so the default stays `north`. The other way round
+//! the road instead of 31 m when the road runs north-south. Measured (BENCHMARKS.md): level on average, so the default stays `north`. The other way round
 //! (the image's top along the way flown, its long side across the track) was 7.7 points of
 //! FOV worse over 21 worlds.
 

@@ -39,13 +39,12 @@ impl Tracker {
     /// for a target seen (nearly) standing, whose measured velocity is the measurement
     /// noise's. A car that had stopped at a junction to turn was last measured at 0.6 m/s
     /// "west", and every re-spread route started on the road west while it drove south
-    /// (field-ring seed 2, BENCHMARKS.md "Field scale, part 38"); without a heading each
+    /// (field-ring seed 2, BENCHMARKS.md); without a heading each
     /// route starts on the road nearest its own draw of where the target was, either way
     /// along a two-way street. A car last measured pulling out of a turn back (1.6 m/s after
     /// cruising at 12) had for a heading the chord of its turn, 50 degrees off the road it
     /// took: every route went up the crossing road, the filter's belief on the right road
-    /// was thrown away, and the car was never found again (random-6, BENCHMARKS.md "Field
-    /// scale, part 48").
+    /// was thrown away, and the car was never found again (random-6, BENCHMARKS.md).
     pub(super) fn last_seen_heading(&self) -> Option<Enu2> {
         let s = self.last_seen_speed_mps;
         let moving =
@@ -85,21 +84,21 @@ impl Tracker {
     /// the roads the target can have driven to since it was last seen, each on one route
     /// forward from the last measurement and weighted by the empty frames since
     /// ([`Self::respread_along_routes`]); never seen, each on a route from a point on the
-    /// cue's roads, weighted by every empty frame since the start (before session 20 the
-    /// cue's roads carried forward, which gave the roads the drone had flown along empty
+    /// cue's roads, weighted by every empty frame since the start (the cue's
+    /// roads carried forward instead gave the roads the drone had flown along empty
     /// their share back: on field-eight the car was never found in 4 runs of 10); anywhere
     /// without a cue. A disc around the last measurement would put half the belief behind
     /// the target and on roads it cannot have reached; spreading over the reachable roads
-    /// alone (before session 19) gave the branches the camera had already ruled out their
+    /// alone gave the branches the camera had already ruled out their
     /// share back (field-grid: the belief that had found the car turning north was split
     /// even again at the re-spread, and the drone flew east after it).
     ///
-    /// Once per spell (before session 36) a long search lost the hypotheses it needed: the
+    /// Re-spread once per spell, a long search lost the hypotheses it needed: the
     /// empty views killed every particle but those hidden under an occlusion, resampling
     /// multiplied those, and the belief sat under a warehouse for 150 s while the car, which
     /// had turned back there, drove away (outdoor seed 7). A repeated re-spread is drawn
     /// along routes only, and keeps [`RESPREAD_KEEP_SHARE`] of the filter's belief
-    /// ([`ParticleFilter::keep_part_of`]); BENCHMARKS.md "Field scale, part 33".
+    /// ([`ParticleFilter::keep_part_of`]); BENCHMARKS.md.
     pub(super) fn respread_if_long_unseen(&mut self, t_s: f64) {
         let Some(after) = self.params.respread_after_s else {
             return;
@@ -185,8 +184,7 @@ impl Tracker {
     /// ruled out stays ruled out). A learned model that knows the roads still predicts one
     /// next position per track: at a fork it sends every track the same way (the outdoor
     /// DMMN: all of them on east at node 1, the car north), and only the re-routing splits
-    /// the belief over the branches by their probabilities (BENCHMARKS.md "Field scale,
-    /// part 36"). Before the first sighting, for a model that does not know the roads
+    /// the belief over the branches by their probabilities (BENCHMARKS.md). Before the first sighting, for a model that does not know the roads
     /// (constant velocity), a share of the particles (`injection_share`) is replaced by
     /// hypotheses on the roads around the belief (within two standard deviations of its
     /// mean plus a second at the largest speed). A share of 0 turns both off.

@@ -54,7 +54,7 @@ const CRUISE_WINDOW_S: f64 = 20.0;
 
 /// The share of the belief a repeated re-spread keeps on the filter's particles (the rest
 /// goes on new routes, [`ParticleFilter::keep_part_of`]). Half, the one value measured
-/// (BENCHMARKS.md "Field scale, part 33"): all routes lost resolution where the filter's
+/// (BENCHMARKS.md): all routes lost resolution where the filter's
 /// belief was right (field-eight -2.9 points).
 const RESPREAD_KEEP_SHARE: f64 = 0.5;
 
@@ -105,8 +105,8 @@ pub struct Failsafe {
 }
 
 /// The slowest speed of the search from a cue, as a share of the motion model's largest,
-/// when a config leaves `acquisition.min_speed_mps` out. With speeds uniform from 0 (before
-/// session 47) half the cue's belief was slower than half the largest speed and stayed
+/// when a config leaves `acquisition.min_speed_mps` out. With speeds uniform from 0, half
+/// the cue's belief was slower than half the largest speed and stayed
 /// near the cue: EER, which values what it can see within its 2 s horizon, hovered over
 /// the cue's junction while the car drove away (random-1 run 0: 107 m behind after 10 s)
 /// and, chasing from behind, its sweep ruled out the slow hypotheses of the road it chased
@@ -115,7 +115,7 @@ pub struct Failsafe {
 /// when the drone passes the cue, and an operator who expects a parked target sets the
 /// key to 0. Sixteen random worlds' own seeds: mean FOV +3.1 points, the first sighting's
 /// failures most (random-15 26.9 -> 46.3 %, random-16 33.3 -> 48.2 %); BENCHMARKS.md
-/// "Field scale, part 44".
+/// BENCHMARKS.md.
 pub const DEFAULT_CUE_MIN_SPEED_SHARE: f64 = 0.5;
 
 /// Everything the tracker is built from: each component's own parameters.

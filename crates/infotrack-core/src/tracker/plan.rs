@@ -142,10 +142,10 @@ impl Tracker {
         let vehicle_enu = &vehicle.centre_enu;
         let over_target_velocity_enu = self.confident_velocity();
         let horizon_s = self.params.eer.horizon_steps as f64 * self.params.filter.dt_s;
-        // Searching, EER keeps to one mode (BENCHMARKS.md "Field scale, parts 26-27"): until
+        // Searching, EER keeps to one mode (BENCHMARKS.md): until
         // the first sighting only. Once the target has been seen, the argmax decides even
-        // through a loss; kept after a loss too (parts 27-55), the commitment held the drone
-        // on a refuted branch past covered junctions (part 56).
+        // through a loss; kept after a loss too, the commitment held the drone
+        // on a refuted branch past covered junctions (BENCHMARKS.md).
         let searching = self.last_measurement.is_none();
         let Estimator::Particle { pf, model } = &mut self.estimator else {
             // Refused at construction by check_combination.
@@ -165,7 +165,7 @@ impl Tracker {
         // EER plans with the prediction the filter makes: where the filter re-routes its
         // belief at junctions, so does the rollout. Straight on, the predicted tracks ran
         // off the road past every corner and EER sent the drone there: it overshot the
-        // car's turns and chased from behind (BENCHMARKS.md "Field scale, part 24").
+        // car's turns and chased from behind (BENCHMARKS.md).
         let reroutes = self.last_measurement.is_some() && self.params.injection_share > 0.0;
         let on_road_m = 0.5 * self.params.filter.road_sigma_m.unwrap_or(0.0);
         self.planner.reroute_rollout(reroutes.then_some(on_road_m));
@@ -274,14 +274,14 @@ impl Tracker {
     /// road than the view's shorter side, or when the road path is longer than
     /// [`ROAD_PATH_DETOUR`] x the straight line. Over 40 outdoor closed-loop seeds the car
     /// was in view more often on 29 (sign test p ~ 0.006) and lost for good on none, where
-    /// the straight line lost it on three (BENCHMARKS.md "Field scale, parts 50-52"). From
-    /// part 56 to part 61 only before the first sighting: after a loss the drone flew
+    /// the straight line lost it on three (BENCHMARKS.md). Flown
+    /// only before the first sighting, after a loss the drone flew
     /// straight, kept the offset it had from cutting a junction's corner, and passed the car
     /// 15-20 m beside its road, outside the view's shorter side. Flying the roads after a
     /// loss too: +1.4 and +1.6 points of FOV over 22 worlds on two seeds, the closed loop's
     /// seed 3 25.3 -> 6.7 m, but two closed-loop seeds of 80 lost for good where the car
-    /// turns back unseen under cover (part 62). There the road path was in force for one
-    /// plan only; the drone's flight past the cover came from EER's near waypoints (part 63).
+    /// turns back unseen under cover (BENCHMARKS.md). There the road path was in force for one
+    /// plan only; the drone's flight past the cover came from EER's near waypoints (BENCHMARKS.md).
     pub(super) fn along_the_roads(
         &self,
         vehicle_enu: &Enu2,
@@ -306,7 +306,7 @@ impl Tracker {
 
 /// How much longer than the straight line a road path to a far waypoint may be and still be
 /// flown ([`Tracker::along_the_roads`]): a quarter, the one value measured (BENCHMARKS.md
-/// "Field scale, part 50"). Beyond it the roads wind away from where the drone must go.
+/// BENCHMARKS.md). Beyond it the roads wind away from where the drone must go.
 pub(super) const ROAD_PATH_DETOUR: f64 = 1.25;
 
 /// The planned motion toward a waypoint beyond every candidate of the reachable region (a
@@ -317,8 +317,7 @@ pub(super) const ROAD_PATH_DETOUR: f64 = 1.25;
 /// trailing it by speed / position gain. Otherwise zero, a fixed point, which arrives
 /// sooner than a setpoint that spreads the move over the horizon (that cost the lab's closed
 /// loop 12-17 points of FOV). The threshold was `reach` at first; at the grid's corners the
-/// transit cost the lab's closed loop 1.3 points over 16 seeds (BENCHMARKS "Field scale,
-/// part 7").
+/// transit cost the lab's closed loop 1.3 points over 16 seeds (BENCHMARKS.md).
 pub(super) fn approach_velocity(
     vehicle_enu: &Enu2,
     waypoint_enu: &Enu2,

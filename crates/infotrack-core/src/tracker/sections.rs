@@ -42,7 +42,7 @@ pub struct AcquisitionConfig {
     /// first sighting, the re-spread from them): `traffic`, each road by its share of the
     /// traffic per metre that a car driving the road graph's turn probabilities puts on it
     /// (past a fork, a 0.75 turn holds three times the belief of a 0.25 one), or `length`,
-    /// by length alone (before session 55). Absent: `traffic`.
+    /// by length alone (the simpler prior). Absent: `traffic`.
     #[serde(default)]
     pub prior: Option<crate::world::road::RoadWeighting>,
 }

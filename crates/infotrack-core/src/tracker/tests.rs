@@ -583,8 +583,8 @@ fn weights_past_the_fork(t: &Tracker, north_y: f64, east_x: f64) -> (f64, f64) {
 fn a_car_seen_standing_is_re_spread_from_the_road_it_stands_on_not_its_noise_heading() {
     // Standing 3 m up the north road, its measurements creeping east at 0.3 m/s (noise: a
     // tenth of field-grid's largest hypothesis speed is 1.6 m/s): the routes start on the
-    // road nearest where it was, north; before session 41 the creep's heading put every
-    // route on the road east (north 0.03, east 0.92).
+    // road nearest where it was, north; taken from the creep's heading, every route went on
+    // the road east (north 0.03, east 0.92).
     let (north, east) = re_spread_after_the_fork(0.3);
     assert!(north > 0.7 && east < 0.2, "north {north}, east {east}");
     // Both ways: measured driving east at 5 m/s from the same place, the heading counts and
@@ -628,7 +628,7 @@ fn a_car_last_seen_slowed_far_below_its_cruise_is_re_spread_either_way_not_along
     // Pulling out of a turn back: 5 m north-west in 3 s (1.7 m/s after 10) is the chord of
     // the turn, not the way it drives. Without a heading, half the routes take the street
     // south at once, half go on to the junction, where 0.3 turn back south: 0.65 south.
-    // Before session 50 the chord was the heading: north, 0.3 south.
+    // With the chord as the heading it would be north, 0.3 south.
     let south = re_spread_after_the_turn_back_street(Enu2::new(-3.0, 4.0));
     assert!(south > 0.5, "south {south}");
     // Both ways: measured still driving north at 9 m/s, the heading counts: only the turn
@@ -706,8 +706,8 @@ fn before_the_first_sighting_the_re_spread_from_the_cue_keeps_out_what_was_watch
 
 #[test]
 fn eer_searches_until_the_first_sighting_and_not_after_a_loss() {
-    // Kept after a loss too (parts 27-55), the commitment held the drone on a refuted
-    // branch past covered junctions (BENCHMARKS.md "Field scale, part 56").
+    // Kept after a loss too, the commitment held the drone on a refuted
+    // branch past covered junctions (BENCHMARKS.md).
     let c = field_grid();
     let dt = 1.0 / c.timing.filter_hz;
     let mut t = tracker(&c, GuidanceKind::Eer, false);
@@ -820,7 +820,7 @@ fn a_far_waypoint_is_flown_to_along_the_roads_unless_they_are_far_or_wind_away()
 /// (sd ~25 m) past the overpass at node 1 (500, 0), on the east and north roads out of
 /// it. A drone 15 m north of the road at (250, 15), 250 m west, flies the road (y = 0)
 /// east at top speed, where straight toward the node it would keep its 15 m offset and
-/// see the road only at its view's edge (BENCHMARKS.md "Field scale, part 62").
+/// see the road only at its view's edge (BENCHMARKS.md).
 #[test]
 fn after_a_loss_a_far_waypoint_is_flown_to_along_the_roads() {
     let c = field_grid();

@@ -434,10 +434,10 @@ impl RoadNetwork {
             .projections_within(p, nearby::reach(first.distance_m))
             .fold(f64::INFINITY, |any, e| any.min(e.distance_m));
         // The heading chooses only among the edges about as near as the nearest: with it
-        // weighed against any distance (before session 25, a 90-degree difference as 1 km),
+        // weighed against any distance (a 90-degree difference as 1 km, say),
         // a slow track 10 m short of a junction whose velocity's noise pointed east was put
         // on the start of an east-going road 390 m back, and a track just past a gentle bend
-        // back on the road before it, 58 m behind (BENCHMARKS "Field scale, part 23").
+        // back on the road before it, 58 m behind (BENCHMARKS.md).
         let near = 2.0 * nearest + self.near_tolerance_m;
         let candidates: Vec<EdgeProjection> =
             self.projections_within(p, nearby::reach(near)).collect();
@@ -450,8 +450,7 @@ impl RoadNetwork {
         // had cut the corner), heading 23 degrees off that road, was put back on the road it
         // came in on, at the junction, and re-routed from there: the whole belief jumped 29 m
         // back, its share down the other branch survived the camera while the car drove out
-        // of view, and the drone followed it (field-ring seed 1, BENCHMARKS "Field scale,
-        // part 38").
+        // of view, and the drone followed it (field-ring seed 1, BENCHMARKS.md).
         let alongside = nearest_its_way <= near;
         let mut best: Option<(f64, (usize, usize, f64))> = None;
         for e in candidates {

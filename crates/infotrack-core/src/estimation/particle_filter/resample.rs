@@ -71,7 +71,7 @@ impl ParticleFilter {
     /// into view) every slot would take it and every track would stand still: a car that
     /// drives out from under a bridge at 14 m/s was followed by a belief at rest, slow
     /// hypotheses under the bridge the camera cannot refute took the weight, and the car
-    /// was lost for good (field-ring, BENCHMARKS.md "Field scale, part 21"). So, with
+    /// was lost for good (field-ring, BENCHMARKS.md). So, with
     /// `keep_velocity` (a motion model that does not know the roads: constant velocity, whose
     /// state the track's velocity is), each track through one measurement moves at the
     /// velocity of a particle drawn by weight, the prediction's own belief of how the target

@@ -124,7 +124,7 @@ impl ParticleFilter {
                 // occlusion left every route the first empty frame would have seen
                 // refuted at 1e-6 except the fastest few: the re-spread put all the weight
                 // on ~1 % of the routes, at the top speed, and ran ahead of the car
-                // (BENCHMARKS "Field scale, part 22").
+                // (BENCHMARKS.md).
                 RouteStart::At(z, heading) => (z + world.measurement.noise.sample(rng), heading),
                 RouteStart::On(roads) => match roads.sample(rng) {
                     Some((p, dir)) => (p, Some(dir)),
@@ -225,10 +225,10 @@ impl ParticleFilter {
     /// roads it can take within that step (the turns drawn by their graph probabilities, the
     /// turn back at a node with a two-way street included: [`road_following::reroute_track`]),
     /// keeping its speed and its weight. The belief then goes through a junction the way the target can,
-    /// every branch in proportion (before session 23, 2 % of the particles per step became
-    /// road-following clones: a corner kept ~2 % of the weight that reached it, the belief
+    /// every branch in proportion (with 2 % of the particles per step made road-following
+    /// clones instead, a corner kept ~2 % of the weight that reached it, the belief
     /// slowed from 14 to 5-8 m/s at corners and slow clusters sat at the roads' ends;
-    /// BENCHMARKS.md "Field scale, part 21"). A particle whose step stays on its road (one
+    /// BENCHMARKS.md). A particle whose step stays on its road (one
     /// piece ahead, or two with the straight-on step within half a road sigma of a road:
     /// a bend it follows anyway) is left alone; one more than three road sigmas off every road
     /// with one piece ahead is put on that piece. Nothing without roads.

@@ -296,7 +296,7 @@ fn a_reseed_through_one_measurement_keeps_the_weighted_belief_of_the_velocity() 
     // Outdoor world: half the particles drive east at 12 m/s and carry all the weight,
     // half drive west; the target comes back into view at (400, 0) after a gap, so the
     // window holds that one measurement. The re-seeded tracks end at the measurement and
-    // drive east at 12 m/s (before session 23 they stood still).
+    // drive east at 12 m/s (not standing still).
     let c = outdoor();
     let world = c.world();
     let mut rng = CoreRng::seed_from_u64(11);
@@ -762,9 +762,8 @@ fn a_spread_from_a_measurement_short_of_an_occlusion_keeps_the_slower_routes() {
 fn particles_off_the_road_beside_one_piece_are_put_back_on_it() {
     // Outdoor world: every particle 20 m north of the y = 0 road mid-edge (x = 300, far from
     // any junction), driving east at 10 m/s. The one piece of road within its step is the
-    // road's own: each is put on it, east at its speed, keeping its weight. Before session
-    // 61 such a track counted as following its road and ran on 20 m off it (BENCHMARKS.md
-    // "Field scale, parts 58 and 59").
+    // road's own: each is put on it, east at its speed, keeping its weight. Counted as
+    // following its road, such a track ran on 20 m off it (BENCHMARKS.md).
     let c = outdoor();
     let world = c.world();
     let mut rng = CoreRng::seed_from_u64(9);

@@ -5,7 +5,7 @@
 //! at a covered junction) the argmax jumped between far apart modes from one plan to the
 //! next, and the drone flew back and forth between them and reached neither (field-town: a
 //! median of 166 s to the first sighting; field-eight: between the covered crossing's two
-//! exits; BENCHMARKS.md "Field scale, parts 26-27"). While searching (the target not yet
+//! exits; BENCHMARKS.md). While searching (the target not yet
 //! seen, see the tracker), the plan keeps to the candidate
 //! nearest its previous waypoint among those whose EER is within a share of the EER range
 //! below the best, so the drone flies to one mode unless another is clearly better. A
@@ -14,7 +14,7 @@
 //! passes none ([`super::EerPlanner::decide`]) and the argmax decides again. Kept to the
 //! end, it chased the refuted mode's fastest hypotheses past a covered junction while the
 //! car drove off the other way (the outdoor closed loop: 5 of 80 seeds lost the car for good;
-//! BENCHMARKS.md "Field scale, part 55"). Since part 56 the commitment ends at the first
+//! BENCHMARKS.md). So the commitment ends at the first
 //! sighting: after a loss the argmax decides, which with hypotheses that slow down to turn
 //! back ([`crate::estimation::road_following::reroute_track`]) lost the car for good on 1
 //! seed of 80 against 3, and no longer flip-flops at field-eight's covered crossing.

@@ -12,15 +12,14 @@
 //! agent, 0 when it comes closer), and renormalised: the plan looks first where the
 //! escaping belief is. The filter's belief is untouched (only EER's copy of the weights);
 //! the expectation weights alpha move with them. A departure from the paper's eq. 13-14,
-//! documented; `guidance.search_escape_floor = 1` restores them. BENCHMARKS.md "Field scale,
-//! part 45".
+//! documented; `guidance.search_escape_floor = 1` restores them. BENCHMARKS.md.
 
 use super::EerInputs;
 use crate::world::geometry::Enu2;
 
 /// `guidance.search_escape_floor` when a config leaves it out: the weight a hypothesis that
-/// is not driving away gets, relative to one driving away at the fastest speed. 0.1 in
-/// session 47; at 0.3 (session 48, BENCHMARKS.md "Field scale, part 46") the plan chases the
+/// is not driving away gets, relative to one driving away at the fastest speed. At
+/// 0.3 rather than 0.1 (BENCHMARKS.md) the plan chases the
 /// belief's fastest front less (field-hill's drone had flown past the car 22 m to its side
 /// after hypotheses 5 m/s faster), and the stand-ins and the random worlds both gain.
 pub const DEFAULT_SEARCH_ESCAPE_FLOOR: f64 = 0.3;

@@ -158,8 +158,7 @@ fn rng() -> rand_chacha::ChaCha8Rng {
 }
 
 /// A loop 0 -> 1 -> 2 with a gentle bend at 1 (14 degrees in, 11 out) and a chord 1 -> 5
-/// north, 5 -> 0 back south-west: the geometry of the track jumps BENCHMARKS "Field
-/// scale, part 23" found.
+/// north, 5 -> 0 back south-west: the geometry of the track jumps BENCHMARKS.md found.
 fn bend_and_chord() -> RoadNetwork {
     network(
         &[

@@ -7,7 +7,7 @@
 //! of road, the edge's traffic flow pi(u) p(u->v). An operator's cue says only "within this
 //! radius"; spread by length alone, the prior gave a fork's 0.25 branch as much of the
 //! belief per metre as its 0.75 one (random-3: the search flew the 0.25 branch first in
-//! 9 runs of 10, the car took the other in 7; BENCHMARKS.md "Field scale, part 53").
+//! 9 runs of 10, the car took the other in 7; BENCHMARKS.md).
 
 use serde::{Deserialize, Serialize};
 
@@ -23,7 +23,7 @@ pub enum RoadWeighting {
     /// the long run): where a car driving the graph is likely to be.
     #[default]
     Traffic,
-    /// Each road by its length alone (before session 55; what issue 12 first asked for):
+    /// Each road by its length alone (the simpler prior):
     /// for a graph whose turn probabilities are not to be trusted.
     Length,
 }
