@@ -16,6 +16,10 @@
 #   --destdir DIR   install under DIR instead of / (packaging, tests); no user, no systemctl
 #   --binary FILE   install this infotrack binary instead of building one
 #   --config NAME   the config the service runs (default px4.toml; ardupilot.toml for ArduPilot)
+#   --prefix DIR    the program under DIR/lib/infotrack and DIR/bin (default /usr/local;
+#                   scripts/build-deb.sh packages with /usr)
+#   --files-only    install the files only: no user, no systemctl (a package's postinst does
+#                   those)
 # Then: edit /etc/infotrack/config/<config> (vehicle URL, camera, calibration), and
 #   systemctl enable --now infotrack; journalctl -u infotrack -f
 set -euo pipefail
@@ -24,12 +28,16 @@ cd "$(dirname "$0")/.."
 destdir=""
 binary=""
 config="px4.toml"
+prefix="/usr/local"
+files_only=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --destdir) destdir="$2"; shift 2 ;;
     --binary) binary="$2"; shift 2 ;;
     --config) config="$2"; shift 2 ;;
-    *) echo "install: unknown option $1 (--destdir DIR, --binary FILE, --config NAME)" >&2; exit 2 ;;
+    --prefix) prefix="$2"; shift 2 ;;
+    --files-only) files_only=1; shift ;;
+    *) echo "install: unknown option $1 (--destdir DIR, --binary FILE, --config NAME, --prefix DIR, --files-only)" >&2; exit 2 ;;
   esac
 done
 [ -f "config/$config" ] || { echo "install: config/$config does not exist" >&2; exit 2; }
@@ -42,13 +50,13 @@ fi
 [ -x "$binary" ] || { echo "install: $binary is not an executable" >&2; exit 2; }
 ort=$(ls .deps/onnxruntime/libonnxruntime.so.* | head -n 1)
 
-lib="$destdir/usr/local/lib/infotrack"
+lib="$destdir$prefix/lib/infotrack"
 etc="$destdir/etc/infotrack"
 var="$destdir/var/lib/infotrack"
-install -d "$lib" "$destdir/usr/local/bin" "$etc" "$var/flights" "$destdir/etc/systemd/system"
+install -d "$lib" "$destdir$prefix/bin" "$etc" "$var/flights" "$destdir/etc/systemd/system"
 install -m 0755 "$binary" "$lib/infotrack"
 install -m 0644 "$ort" "$lib/"
-ln -sfn ../lib/infotrack/infotrack "$destdir/usr/local/bin/infotrack"
+ln -sfn ../lib/infotrack/infotrack "$destdir$prefix/bin/infotrack"
 
 # Configs and models: never overwrite what the operator changed.
 copy_kept() {
@@ -62,12 +70,19 @@ copy_kept() {
   fi
 }
 while IFS= read -r f; do copy_kept "$f" "$etc/$f"; done < <(find config models -type f \
-  \( -name '*.toml' -o -name '*.yaml' -o -name '*.onnx' -o -name '*.json' \) | sort)
+  \( -name '*.toml' -o -name '*.yaml' -o -name '*.onnx' -o -name '*.json' -o -name '*.geojson' \
+  -o -name 'README.md' \) | sort)
 
+unit_dir="$destdir/etc/systemd/system"
+# A package's unit belongs under /lib/systemd/system (the operator's overrides go in /etc).
+[ "$prefix" = "/usr" ] && unit_dir="$destdir/lib/systemd/system" && install -d "$unit_dir"
 sed -e "s|/etc/infotrack/config/px4.toml|/etc/infotrack/config/$config|" \
-  config/infotrack.service > "$destdir/etc/systemd/system/infotrack.service"
+  -e "s|/usr/local/bin/infotrack|$prefix/bin/infotrack|" \
+  config/infotrack.service > "$unit_dir/infotrack.service"
 
-if [ -z "$destdir" ]; then
+if [ -n "$files_only" ]; then
+  echo "install: files done under ${destdir:-/}" >&2
+elif [ -z "$destdir" ]; then
   if ! id infotrack >/dev/null 2>&1; then
     useradd --system --home-dir /var/lib/infotrack --shell /usr/sbin/nologin infotrack
   fi

@@ -215,3 +215,62 @@ fn the_installed_unit_starts_flies_the_mock_as_its_user_and_keeps_its_logs() {
     ));
     assert_eq!(owner.trim(), "infotrack");
 }
+
+/// `scripts/build-deb.sh` for the test binary, into the project's `target/` (bound into
+/// the machine); the package's path.
+fn build_deb(version: &str) -> String {
+    let project = env!("CARGO_MANIFEST_DIR");
+    let out = Command::new("bash")
+        .arg(format!("{project}/scripts/build-deb.sh"))
+        .args(["--fast", "--binary", env!("CARGO_BIN_EXE_infotrack")])
+        .args(["--version", version, "--out"])
+        .arg(format!("{project}/target/debian-test"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "build-deb.sh: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).trim().to_string()
+}
+
+#[test]
+fn the_debian_package_installs_flies_upgrades_and_removes_cleanly() {
+    let version = env!("CARGO_PKG_VERSION");
+    let (first, next) = (build_deb(version), build_deb(&format!("{version}+1")));
+    let m = Machine::boot();
+    m.must(&format!("dpkg -i {first}"));
+    let said =
+        m.must("infotrack --version; id -nG infotrack; stat -c %U /var/lib/infotrack/flights");
+    assert!(said.contains(&format!("infotrack {version} (")), "{said}");
+    assert!(
+        said.contains("infotrack") && said.contains("dialout"),
+        "{said}"
+    );
+    // The unit flies the lab (its vehicle the in-process mock): an operator's drop-in.
+    m.must(
+        "mkdir -p /etc/systemd/system/infotrack.service.d && printf '[Service]\\nExecStart=\\nExecStart=/usr/bin/infotrack run --config /etc/infotrack/config/default.toml --duration 0 --quiet --log-dir /var/lib/infotrack/flights\\n' > /etc/systemd/system/infotrack.service.d/lab.conf && systemctl daemon-reload && systemctl start infotrack",
+    );
+    m.wait_for("the packaged unit tracking", 90, || {
+        journal(&m).contains("infotrack: tracking started")
+    });
+    m.must("systemctl stop infotrack");
+    assert!(journal(&m).contains("ended in HOLD"), "{}", journal(&m));
+    // An upgrade keeps the operator's edit of a conffile.
+    m.must("echo '# the operator was here' >> /etc/infotrack/config/px4.toml");
+    m.must(&format!("dpkg -i --force-confold {next}"));
+    let said =
+        m.must("dpkg-query -W -f '${Version}' infotrack; tail -1 /etc/infotrack/config/px4.toml");
+    assert!(said.starts_with(&format!("{version}+1")), "{said}");
+    assert!(said.contains("the operator was here"), "{said}");
+    // Removed: the program goes, the configs and logs stay; purged: everything, the user too.
+    m.must("dpkg -r infotrack");
+    let (gone, _) = m.sh("test -e /usr/lib/infotrack/infotrack || test -e /usr/bin/infotrack");
+    assert!(!gone, "the program is left after dpkg -r");
+    m.must("test -f /etc/infotrack/config/px4.toml && test -d /var/lib/infotrack/flights");
+    m.must("dpkg -P infotrack");
+    m.must(
+        "! test -e /etc/infotrack && ! test -e /var/lib/infotrack && ! id infotrack 2>/dev/null",
+    );
+}
