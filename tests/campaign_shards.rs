@@ -6,6 +6,9 @@ use std::process::Command;
 
 use serde_json::Value;
 
+mod common;
+use common::results_only;
+
 fn infotrack() -> Command {
     Command::new(env!("CARGO_BIN_EXE_infotrack"))
 }
@@ -33,22 +36,6 @@ fn run(args: &[&str], extra: &[&Path]) -> std::process::Output {
 
 fn read(p: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-}
-
-/// The results without what measures the machine (step times) or says how they were made.
-fn results_only(v: &Value) -> Value {
-    match v {
-        Value::Object(m) => Value::Object(
-            m.iter()
-                .filter(|(k, _)| {
-                    !["filter_step_ms", "guidance_step_ms", "merged_from"].contains(&k.as_str())
-                })
-                .map(|(k, x)| (k.clone(), results_only(x)))
-                .collect(),
-        ),
-        Value::Array(a) => Value::Array(a.iter().map(results_only).collect()),
-        x => x.clone(),
-    }
 }
 
 /// Runs the campaign's shards K of N, each into `dir/shard-K.json`.

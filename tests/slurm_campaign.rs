@@ -8,6 +8,9 @@ use std::process::Command;
 
 use serde_json::Value;
 
+mod common;
+use common::results_only;
+
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
@@ -32,23 +35,6 @@ fn check(o: std::process::Output, what: &str) -> String {
     );
     assert!(o.status.success(), "{what}: {text}");
     text
-}
-
-/// The results without the step times (measurements of the machine that ran them) and
-/// without what says how they were made.
-fn results_only(v: &Value) -> Value {
-    match v {
-        Value::Object(m) => Value::Object(
-            m.iter()
-                .filter(|(k, _)| {
-                    !["filter_step_ms", "guidance_step_ms", "merged_from"].contains(&k.as_str())
-                })
-                .map(|(k, x)| (k.clone(), results_only(x)))
-                .collect(),
-        ),
-        Value::Array(a) => Value::Array(a.iter().map(results_only).collect()),
-        x => x.clone(),
-    }
 }
 
 #[test]

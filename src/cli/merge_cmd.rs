@@ -39,12 +39,7 @@ pub fn merge(a: MergeArgs) -> Result<()> {
     }
     if let Some(dir) = &a.out {
         report::write_json(&dir.join("results.json"), &json)?;
-        let figure =
-            report::bars::MetricsFigure::from_results_json(&json).map_err(anyhow::Error::msg)?;
-        report::bars::draw(&dir.join("metrics.png"), &figure)?;
-        let md =
-            report::markdown::render(&json, Some("metrics.png")).map_err(anyhow::Error::msg)?;
-        report::write_file(&dir.join("report.md"), md.as_bytes())?;
+        super::report_cmd::write_report(dir, &json, "the merged results")?;
         println!(
             "wrote results.json, metrics.png and report.md to {}",
             dir.display()

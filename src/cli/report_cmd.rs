@@ -27,18 +27,25 @@ pub fn report(a: ReportArgs) -> Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| folder_of(&a.results).to_path_buf());
-    let figure = report::bars::MetricsFigure::from_results_json(&v)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", a.results.display()))?;
-    report::bars::draw(&dir.join("metrics.png"), &figure)?;
-    let md = report::markdown::render(&v, Some("metrics.png"))
-        .map_err(|e| anyhow::anyhow!("{}: {e}", a.results.display()))?;
+    write_report(&dir, &v, &a.results.display().to_string())?;
     let path = dir.join("report.md");
-    report::write_file(&path, md.as_bytes())?;
     println!(
         "wrote {} and {}",
         path.display(),
         dir.join("metrics.png").display()
     );
+    Ok(())
+}
+
+/// A campaign's results (`what` names them in an error) as `metrics.png` and `report.md`
+/// in `dir`.
+pub fn write_report(dir: &Path, v: &serde_json::Value, what: &str) -> Result<()> {
+    let figure = report::bars::MetricsFigure::from_results_json(v)
+        .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
+    report::bars::draw(&dir.join("metrics.png"), &figure)?;
+    let md = report::markdown::render(v, Some("metrics.png"))
+        .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
+    report::write_file(&dir.join("report.md"), md.as_bytes())?;
     Ok(())
 }
 

@@ -278,3 +278,22 @@ pub fn film_a_tag(
     w.release().unwrap();
     (video, calib)
 }
+
+/// A campaign's results without its step times (measurements of the machine that ran them)
+/// and without what says how they were made (`merged_from`): what one process and its
+/// merged shards must agree on.
+pub fn results_only(v: &serde_json::Value) -> serde_json::Value {
+    use serde_json::Value;
+    match v {
+        Value::Object(m) => Value::Object(
+            m.iter()
+                .filter(|(k, _)| {
+                    !["filter_step_ms", "guidance_step_ms", "merged_from"].contains(&k.as_str())
+                })
+                .map(|(k, x)| (k.clone(), results_only(x)))
+                .collect(),
+        ),
+        Value::Array(a) => Value::Array(a.iter().map(results_only).collect()),
+        x => x.clone(),
+    }
+}
