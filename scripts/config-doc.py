@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes docs/config.md, the reference of every config key, from the config structs.
+"""Writes docs/src/config.md, the reference of every config key, from the config structs.
 
 Each key's description is its doc comment in the Rust source (which gives its unit and,
 where it has one, its range), its value in the lab scenario is what `infotrack config`
@@ -108,7 +108,9 @@ def value_text(v):
         return f"{len(v)} entries"
     if isinstance(v, list) and v and isinstance(v[0], dict):
         return f"{len(v)} entries"
-    return str(v).replace("'", '"').replace("True", "true").replace("False", "false")
+    text = str(v).replace("'", '"').replace("True", "true").replace("False", "false")
+    # A list in a code span: Markdown would read "[a, b]" as a link's text.
+    return f"`{text}`" if isinstance(v, list) else text
 
 
 def rows(all_structs, name, prefix, values, limits, out):
@@ -181,17 +183,17 @@ def main():
     ap.add_argument("--bin", default=str(ROOT / "target/release/infotrack"))
     a = ap.parse_args()
     text = render(a.bin)
-    path = ROOT / "docs/config.md"
+    path = ROOT / "docs/src/config.md"
     if a.check:
         old = path.read_text() if path.exists() else ""
         if old != text:
             import difflib
 
             diff = difflib.unified_diff(
-                old.splitlines(), text.splitlines(), "docs/config.md", "from the code", lineterm=""
+                old.splitlines(), text.splitlines(), "docs/src/config.md", "from the code", lineterm=""
             )
             sys.exit(
-                "docs/config.md disagrees with the config structs; run "
+                "docs/src/config.md disagrees with the config structs; run "
                 "`python3 scripts/config-doc.py`:\n" + "\n".join(list(diff)[:60])
             )
         return

@@ -7,7 +7,9 @@
 # - .deps/sumo: Eclipse SUMO and sumolib, the reference traffic (scripts/sumo-traffic.py);
 # - osmium-tool: cuts an OpenStreetMap .pbf extract to XML for SUMO's netconvert;
 # - slurm-wlm and munge: a one-node Slurm cluster (scripts/slurm-local.sh) that runs a
-#   campaign's shards as an array job (scripts/slurm-campaign.sh).
+#   campaign's shards as an array job (scripts/slurm-campaign.sh);
+# - .deps/mdbook: mdBook and its link check (mdbook-linkcheck2) from crates.io, pinned,
+#   which build the book in docs/ (tests/docs_book.rs).
 # Idempotent: does nothing when everything is present.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -28,6 +30,16 @@ venv_from .deps/stock-clients tests/stock_clients/requirements.txt "the stock MA
 venv_from .deps/stats tests/stats/requirements.txt "SciPy"
 
 venv_from .deps/sumo tests/sumo/requirements.txt "Eclipse SUMO"
+
+# A crate's program of one version under .deps/mdbook, built from crates.io.
+crate_tool() { # crate_tool CRATE VERSION
+  if ! "$PWD/.deps/mdbook/bin/$1" --version 2>/dev/null | grep -q "$2"; then
+    echo "setup-tests: building $1 $2 from crates.io into .deps/mdbook" >&2
+    cargo install --quiet --locked --root .deps/mdbook "$1" --version "=$2"
+  fi
+}
+crate_tool mdbook 0.5.4
+crate_tool mdbook-linkcheck2 0.13.0
 
 missing=()
 for pkg in osmium-tool slurm-wlm munge; do

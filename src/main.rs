@@ -49,7 +49,7 @@ enum Command {
     /// Re-run estimation and guidance on a recorded `infotrack run` flight and compare.
     Replay(run_cmd::ReplayArgs),
     /// Print a configuration with every key filled in (defaults included), as TOML: what a
-    /// config file means. `docs/config.md` lists every key.
+    /// config file means. `docs/src/config.md` lists every key.
     Config(ConfigArgs),
     /// Calibrate a camera from chessboard views (a folder or a live camera) into the OpenCV
     /// YAML that `daemon.calibration` reads.

@@ -1,4 +1,4 @@
-//! docs/config.md, the reference of every config key, is what `scripts/config-doc.py`
+//! docs/src/config.md, the reference of every config key, is what `scripts/config-doc.py`
 //! generates from the config structs (doc comments, the lab's values, the bounds): a key
 //! added, renamed or re-documented without regenerating it fails here.
 
@@ -21,7 +21,7 @@ fn the_config_reference_matches_the_code() {
         String::from_utf8_lossy(&out.stderr)
     );
     // Not vacuous: the reference names the keys an operator edits most.
-    let doc = std::fs::read_to_string(format!("{root}/docs/config.md")).unwrap();
+    let doc = std::fs::read_to_string(format!("{root}/docs/src/config.md")).unwrap();
     for key in [
         "`daemon.engage`",
         "`daemon.vehicle`",
@@ -30,6 +30,6 @@ fn the_config_reference_matches_the_code() {
         "`filter.particles`",
         "`vision.detector.decimation`",
     ] {
-        assert!(doc.contains(key), "{key} missing from docs/config.md");
+        assert!(doc.contains(key), "{key} missing from docs/src/config.md");
     }
 }

@@ -860,6 +860,27 @@ async fn arming_waits_for_a_vehicle_that_becomes_ready() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_guided_set_just_before_arducopters_start_up_completes_is_set_again() {
+    // ArduCopter accepts GUIDED during its first 2.2 s and drops it back to STABILIZE when
+    // its start-up completes. A companion that boots with the autopilot may set GUIDED
+    // just before that, with no heartbeat between to show it: the mode the vehicle accepted
+    // but never showed, on the ground, is asked for again, whenever the daemon starts.
+    for late_s in [0.0, 0.6, 1.2, 1.8] {
+        let mut mc = MockConfig::new(Flavor::ArduPilot);
+        mc.startup_s = 2.2;
+        let (mock, port) = udp_mock(mc).await;
+        tokio::time::sleep(Duration::from_secs_f64(late_s)).await;
+        let mut cfg = lab();
+        cfg.daemon.vehicle = format!("udpout:127.0.0.1:{port}");
+        let r = daemon::run(&cfg, &opts(1.0, None))
+            .await
+            .unwrap_or_else(|e| panic!("started {late_s} s after the vehicle: {e}"));
+        assert!(!r.output.records.is_empty(), "started {late_s} s after");
+        assert!(mock.with(|m| m.armed()), "started {late_s} s after");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_daemon_without_the_simulators_refuses_the_mock_and_the_synthetic_camera() {
     // The daemon reaches the mock and the simulator only through what the program hands
     // it: without them a `mock:` vehicle or the synthetic camera is an error, not a flight.

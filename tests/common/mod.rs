@@ -297,3 +297,21 @@ pub fn results_only(v: &serde_json::Value) -> serde_json::Value {
         x => x.clone(),
     }
 }
+
+/// Every Markdown page under `dir`, recursively, sorted: the book's pages under `docs/src`.
+pub fn markdown_pages(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    fn walk(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        for entry in std::fs::read_dir(dir).expect("the folder lists") {
+            let path = entry.expect("an entry of the folder").path();
+            if path.is_dir() {
+                walk(&path, out);
+            } else if path.extension().is_some_and(|e| e == "md") {
+                out.push(path);
+            }
+        }
+    }
+    let mut pages = Vec::new();
+    walk(dir, &mut pages);
+    pages.sort();
+    pages
+}

@@ -24,7 +24,7 @@ const CUE_RADIUS_M: f64 = 100.0;
 /// The slowest speed the search from the cue assumes (`acquisition.min_speed_mps`), m/s:
 /// a town's car stands at lights and in queues, so a cued car may be standing. On SUMO's
 /// traffic in four street networks this raised the mean %FOV of EER's search from 18.0 to
-/// 24.6 (docs/traffic-experiments.md).
+/// 24.6 (docs/src/traffic.md).
 const CUE_MIN_SPEED_MPS: f64 = 0.0;
 
 /// A world made from an extract.

@@ -84,8 +84,12 @@ impl VehicleLink {
 
     /// [`Self::set_mode`], retried while the vehicle answers TEMPORARILY_REJECTED (MAVLink's
     /// "try again later") until `timeout`: PX4 SIH refused OFFBOARD so while its "Failsafe:
-    /// blind land" held, and older PX4 releases refuse it until setpoints stream. Any
-    /// other refusal is final at once; the error carries the vehicle's last reason.
+    /// blind land" held, and older PX4 releases refuse it until setpoints stream. A mode
+    /// the vehicle accepted but never showed while it is disarmed is asked for again too:
+    /// ArduCopter takes a mode during its start-up and drops it back to STABILIZE when the
+    /// start-up completes, and a change set just before that may never reach a heartbeat.
+    /// Asking again then undoes no pilot: nobody flies a disarmed vehicle. Any other
+    /// refusal is final at once; the error carries the vehicle's last reason.
     pub async fn set_mode_when_ready(
         &self,
         mode: Mode,
@@ -97,7 +101,21 @@ impl VehicleLink {
             reason,
             seconds: timeout.as_secs_f64(),
         };
-        let attempt = || self.set_mode(mode);
+        let attempt = || async move {
+            match self.set_mode(mode).await {
+                Err(LinkError::Timeout { .. }) if !self.state().armed => {
+                    tracing::warn!(
+                        "the vehicle accepted {mode} but its heartbeat never showed it \
+                         (an ArduCopter start-up drops a mode set during it); asking again"
+                    );
+                    Err(LinkError::Refused {
+                        command: MavCmd::MAV_CMD_DO_SET_MODE,
+                        result: MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
+                    })
+                }
+                other => other,
+            }
+        };
         self.retry_refusals(
             &format!("enter {mode}"),
             timeout,
