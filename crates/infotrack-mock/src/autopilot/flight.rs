@@ -87,8 +87,8 @@ impl MockAutopilot {
     }
 
     /// Advances the vehicle `dt` s: motionless while the motors spool up, then toward the
-    /// target moved by the loop's wander, climbing at the takeoff rate until the target
-    /// altitude is first reached.
+    /// target moved by the loop's wander (straight to it while taking off, until the target
+    /// altitude is first reached).
     pub(super) fn fly(&mut self, limits: &Limits, dt: f64) {
         let r = self.cfg.response;
         if self.now_s - self.armed_at_s < r.spool_up_s {
@@ -115,7 +115,6 @@ impl MockAutopilot {
         let cmd = Command {
             target_ned_m: target,
             feed_forward_ned_mps: self.target_vel_ned_mps,
-            taking_off: self.taking_off,
         };
         self.state.step(&cmd, limits, &r, dt);
     }

@@ -226,6 +226,53 @@ fn ardupilot_takeoff_then_guided_targets() {
     );
 }
 
+/// A takeoff to a field altitude answers as SITL: ArduCopter SITL climbed to 45 m at
+/// ~2.5 m/s (WPNAV_SPEED_UP), so each flavour's calibrated mock reaches 95 % of 45 m within
+/// about 45 / 2.5 = 18 s of climbing (the firmware's climb limit; PX4's MPC_Z_VEL_MAX_UP is
+/// 3 m/s), not at the slow rate the probe's 1.2 m takeoff shows.
+#[test]
+fn a_takeoff_to_a_field_altitude_climbs_at_the_firmwares_limit() {
+    for flavor in [Flavor::ArduPilot, Flavor::Px4] {
+        let mut cfg = MockConfig::new(flavor);
+        cfg.answer_as_sitl();
+        cfg.startup_s = 0.0;
+        let mut m = MockAutopilot::new(cfg, 0.0);
+        let up = [0.0, 0.0, -45.0];
+        let t = match flavor {
+            Flavor::Px4 => {
+                let t = stream(&mut m, 0.0, 1.5, Some(up));
+                set_mode(&mut m, t, Mode::Offboard);
+                t
+            }
+            Flavor::ArduPilot => {
+                set_mode(&mut m, 0.0, Mode::Guided);
+                0.0
+            }
+        };
+        assert_eq!(arm(&mut m, t), MavResult::MAV_RESULT_ACCEPTED, "{flavor:?}");
+        if flavor == Flavor::ArduPilot {
+            m.handle(
+                t,
+                &GCS,
+                &cmd(
+                    MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 45.0],
+                ),
+            );
+        }
+        let sp = (flavor == Flavor::Px4).then_some(up);
+        let mut now = t;
+        while -m.position_ned_m()[2] < 0.95 * 45.0 && now < t + 60.0 {
+            now = stream(&mut m, now, now + 0.5, sp);
+        }
+        let took = now - t;
+        assert!(
+            (15.0..30.0).contains(&took),
+            "{flavor:?}: 95 % of 45 m after {took:.1} s"
+        );
+    }
+}
+
 /// An ArduPilot mock with FS_GCS_ENABLE = 1, armed in GUIDED; its heartbeat, and the
 /// companion's header (system 1, component 191), whose heartbeats the failsafe ignores.
 fn armed_in_guided_with_gcs_failsafe() -> (MockAutopilot, MavMessage, MavHeader) {
