@@ -5,8 +5,12 @@
 # with the scripts that create the user `infotrack` and remove it on purge.
 #
 #   bash scripts/build-deb.sh [--binary FILE] [--version V] [--out DIR] [--fast]
+#                             [--arch ARCH --onnxruntime FILE]
 #
 # --fast packs with gzip instead of xz (tests: seconds instead of half a minute).
+# --arch arm64 packs a cross-built program (scripts/build-arm64.sh --deb does) with its
+# architecture's ONNX Runtime; its dependencies come from the arm64 libraries installed
+# beside this machine's own (dpkg multiarch).
 # Writes DIR/infotrack_V_ARCH.deb (default: target/debian/, the version Cargo's, the
 # architecture this machine's) and prints its path. Install with
 # `apt install ./infotrack_V_ARCH.deb`, then edit /etc/infotrack/config/px4.toml and
@@ -14,18 +18,29 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-binary="" version="" out="target/debian" compression=(-Zxz)
+binary="" version="" out="target/debian" compression=(-Zxz) arch="" ort=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --binary) binary="$2"; shift 2 ;;
     --version) version="$2"; shift 2 ;;
     --out) out="$2"; shift 2 ;;
     --fast) compression=(-Zgzip -z1); shift ;;
-    *) echo "build-deb: unknown option $1 (--binary FILE, --version V, --out DIR, --fast)" >&2; exit 2 ;;
+    --arch) arch="$2"; shift 2 ;;
+    --onnxruntime) ort=(--onnxruntime "$2"); shift 2 ;;
+    *) echo "build-deb: unknown option $1 (--binary FILE, --version V, --out DIR, --fast, --arch ARCH, --onnxruntime FILE)" >&2; exit 2 ;;
   esac
 done
 [ -n "$version" ] || version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
-arch=$(dpkg --print-architecture)
+native=$(dpkg --print-architecture)
+[ -n "$arch" ] || arch=$native
+if [ "$arch" != "$native" ] && { [ -z "$binary" ] || [ ${#ort[@]} -eq 0 ]; }; then
+  echo "build-deb: a package for $arch needs its --binary and --onnxruntime" >&2
+  exit 2
+fi
+# The GNU triplet of the package's architecture: its strip and objdump read the program.
+triplet=$(dpkg-architecture -a"$arch" -qDEB_HOST_GNU_TYPE 2>/dev/null)
+tools=""
+[ "$arch" != "$native" ] && tools="$triplet-"
 if [ -z "$binary" ]; then
   cargo build --release --locked --bin infotrack
   binary=target/release/infotrack
@@ -33,17 +48,19 @@ fi
 
 stage=$(mktemp -d)
 trap 'rm -rf "$stage"' EXIT
-bash scripts/install.sh --destdir "$stage" --prefix /usr --files-only --binary "$binary" >&2
+bash scripts/install.sh --destdir "$stage" --prefix /usr --files-only --binary "$binary" \
+  "${ort[@]}" >&2
 rmdir "$stage/etc/systemd/system" "$stage/etc/systemd" 2>/dev/null || true
 # The package's program is stripped: its line tables stay in the build's own binary.
-strip --strip-debug "$stage/usr/lib/infotrack/infotrack"
+"${tools}strip" --strip-debug "$stage/usr/lib/infotrack/infotrack"
 
 # What the program links to, as Debian package dependencies (dpkg-shlibdeps reads them
 # from the shared libraries' own packages). ONNX Runtime ships inside the package.
 shlibs=$(mktemp -d)
 mkdir -p "$shlibs/debian"
 printf 'Source: infotrack\n\nPackage: infotrack\nArchitecture: any\n' >"$shlibs/debian/control"
-depends=$(cd "$shlibs" && dpkg-shlibdeps -O -e"$stage/usr/lib/infotrack/infotrack" \
+depends=$(cd "$shlibs" && DEB_HOST_ARCH="$arch" DEB_HOST_GNU_TYPE="$triplet" \
+  DEB_HOST_MULTIARCH="$triplet" dpkg-shlibdeps -O -e"$stage/usr/lib/infotrack/infotrack" \
   -l"$stage/usr/lib/infotrack" 2>/dev/null | sed -n 's/^shlibs:Depends=//p')
 rm -rf "$shlibs"
 

@@ -15,6 +15,8 @@
 # Options:
 #   --destdir DIR   install under DIR instead of / (packaging, tests); no user, no systemctl
 #   --binary FILE   install this infotrack binary instead of building one
+#   --onnxruntime FILE  the ONNX Runtime library to install beside it (default: the one
+#                   scripts/setup.sh puts in .deps/onnxruntime; the arm64 package's own)
 #   --config NAME   the config the service runs (default px4.toml; ardupilot.toml for ArduPilot)
 #   --prefix DIR    the program under DIR/lib/infotrack and DIR/bin (default /usr/local;
 #                   scripts/build-deb.sh packages with /usr)
@@ -30,14 +32,16 @@ binary=""
 config="px4.toml"
 prefix="/usr/local"
 files_only=""
+ort=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --destdir) destdir="$2"; shift 2 ;;
     --binary) binary="$2"; shift 2 ;;
+    --onnxruntime) ort="$2"; shift 2 ;;
     --config) config="$2"; shift 2 ;;
     --prefix) prefix="$2"; shift 2 ;;
     --files-only) files_only=1; shift ;;
-    *) echo "install: unknown option $1 (--destdir DIR, --binary FILE, --config NAME, --prefix DIR, --files-only)" >&2; exit 2 ;;
+    *) echo "install: unknown option $1 (--destdir DIR, --binary FILE, --onnxruntime FILE, --config NAME, --prefix DIR, --files-only)" >&2; exit 2 ;;
   esac
 done
 [ -f "config/$config" ] || { echo "install: config/$config does not exist" >&2; exit 2; }
@@ -48,7 +52,8 @@ if [ -z "$binary" ]; then
   binary=target/release/infotrack
 fi
 [ -x "$binary" ] || { echo "install: $binary is not an executable" >&2; exit 2; }
-ort=$(ls .deps/onnxruntime/libonnxruntime.so.* | head -n 1)
+[ -n "$ort" ] || ort=$(ls .deps/onnxruntime/libonnxruntime.so.* | head -n 1)
+[ -f "$ort" ] || { echo "install: no ONNX Runtime library at $ort" >&2; exit 2; }
 
 lib="$destdir$prefix/lib/infotrack"
 etc="$destdir/etc/infotrack"

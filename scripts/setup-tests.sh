@@ -14,6 +14,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Whether Debian's package is installed; with another architecture's copy beside it (the
+# arm64 build's multiarch libraries) dpkg needs this machine's architecture named.
+installed() {
+  dpkg -s "$1" >/dev/null 2>&1 || dpkg -s "$1:$(dpkg --print-architecture)" >/dev/null 2>&1
+}
+
 # A virtual environment DIR with the pinned packages of REQ, made again when REQ changes.
 venv_from() { # venv_from DIR REQ WHAT
   if ! cmp -s "$2" "$1/installed-requirements.txt" 2>/dev/null; then
@@ -43,7 +49,7 @@ crate_tool mdbook-linkcheck2 0.13.0
 
 missing=()
 for pkg in osmium-tool slurm-wlm munge; do
-  dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
+  installed "$pkg" || missing+=("$pkg")
 done
 if [ ${#missing[@]} -gt 0 ]; then
   echo "setup-tests: installing Debian's ${missing[*]}" >&2

@@ -10,11 +10,17 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Whether Debian's package is installed; with another architecture's copy beside it (the
+# arm64 build's multiarch libraries) dpkg needs this machine's architecture named.
+installed() {
+  dpkg -s "$1" >/dev/null 2>&1 || dpkg -s "$1:$(dpkg --print-architecture)" >/dev/null 2>&1
+}
+
 need=()
 for pkg in pkg-config libfontconfig1-dev libfreetype-dev fonts-dejavu-core \
   libopencv-dev libopencv-contrib-dev clang libclang-dev \
   gstreamer1.0-plugins-base gstreamer1.0-plugins-good; do
-  dpkg -s "$pkg" >/dev/null 2>&1 || need+=("$pkg")
+  installed "$pkg" || need+=("$pkg")
 done
 if [ "${#need[@]}" -gt 0 ]; then
   echo "setup: installing Debian packages: ${need[*]}" >&2

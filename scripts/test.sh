@@ -14,5 +14,14 @@ cargo clippy --release --workspace --all-targets -- -D warnings
 # integration tests fly the mock on the wall clock and mostly wait, and two at a time kept
 # the suite near eight minutes of a 30-minute CI budget (four: under six).
 RUST_TEST_THREADS="${RUST_TEST_THREADS:-4}" cargo test --release --workspace --all-targets
+# The arm64 build under qemu-user: the core's and the detector's tests, the DMMN's parity,
+# a closed-loop flight, and the arm64 package's program flying from its unpacked files.
+arm64=0
+bash scripts/build-arm64.sh --profile arm64-check --test --deb || arm64=$?
+case $arm64 in
+  0) ;;
+  3) echo "arm64 suite NOT RUN: what it needs could not be installed here (above)" ;;
+  *) exit "$arm64" ;;
+esac
 # The real autopilots (SITL), when their builds are beside the project.
 bash scripts/sitl-test.sh

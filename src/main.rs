@@ -53,7 +53,7 @@ enum Command {
     Config(ConfigArgs),
     /// Calibrate a camera from chessboard views (a folder or a live camera) into the OpenCV
     /// YAML that `daemon.calibration` reads.
-    Calibrate(calibrate::CalibrateArgs),
+    Calibrate(cli::calibrate_args::CalibrateArgs),
     /// Worlds from OpenStreetMap extracts (`world import`).
     World(cli::world_cmd::WorldArgs),
     /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell),
@@ -100,7 +100,9 @@ use cli::dataset_cmd::{dataset, DatasetArgs};
 use cli::mock_cmd::{mock_autopilot, MockArgs};
 use cli::params_cmd::{params, ParamsArgs};
 use cli::sim_cmd::{sim, SimArgs};
-use cli::{calibrate, detect, load_config, run_cmd, runtime};
+#[cfg(feature = "opencv")]
+use cli::{calibrate, detect};
+use cli::{load_config, run_cmd, runtime};
 
 /// Keeps freed heap memory in the process instead of handing it back to the kernel after
 /// every frame. The renderer and the AprilTag detector allocate and free ~10 MB of image
@@ -181,11 +183,17 @@ fn main() -> ExitCode {
         Command::Report(a) => cli::report_cmd::report(a),
         Command::Merge(a) => cli::merge_cmd::merge(a),
         Command::Bench(a) => bench(a),
+        #[cfg(feature = "opencv")]
         Command::Detect(a) => detect::run(a.path, a.json, a.pose, a.annotate, a.ids),
+        #[cfg(not(feature = "opencv"))]
+        Command::Detect(_) => Err(built_without_opencv("detect")),
         Command::Dataset(a) => dataset(a),
         Command::MockAutopilot(a) => mock_autopilot(a),
         Command::Params(a) => params(a),
+        #[cfg(feature = "opencv")]
         Command::Calibrate(a) => calibrate::run(a),
+        #[cfg(not(feature = "opencv"))]
+        Command::Calibrate(_) => Err(built_without_opencv("calibrate")),
         Command::World(a) => cli::world_cmd::world(a),
         Command::Completions { shell } => {
             let mut cmd = <Cli as clap::CommandFactory>::command();
@@ -210,4 +218,13 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// What a subcommand that reads images or cameras says in a build without OpenCV.
+#[cfg(not(feature = "opencv"))]
+fn built_without_opencv(command: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "`infotrack {command}` reads images and cameras through OpenCV, and this infotrack was \
+         built without it (its `opencv` feature); use a build with OpenCV"
+    )
 }

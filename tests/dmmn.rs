@@ -1,4 +1,5 @@
-//! The shipped DMMN through ONNX Runtime: parity with PyTorch, use inside the particle
+//! The shipped DMMN through ONNX Runtime (its parity with PyTorch is the model crate's own
+//! test, `crates/infotrack-dmmn/tests/parity.rs`): use inside the particle
 //! filter, and clear errors for bad model files. Needs the ONNX Runtime library that
 //! `scripts/setup.sh` installs.
 
@@ -18,89 +19,6 @@ fn lab_config() -> Config {
     let mut c = Config::default_lab();
     c.motion.dmmn_model = root().join("models/dmmn.onnx");
     c
-}
-
-/// A JSON array of number arrays, row after row, as f32.
-fn flatten_f32(rows: &serde_json::Value) -> Vec<f32> {
-    rows.as_array()
-        .unwrap()
-        .iter()
-        .flat_map(|row| {
-            row.as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap() as f32)
-        })
-        .collect()
-}
-
-#[test]
-fn rust_outputs_match_pytorch_within_1e_5() {
-    let c = lab_config();
-    let mut m = Dmmn::load(&c.motion.dmmn_model, &c.motion_params()).unwrap();
-    let fixture: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(root().join("models/dmmn_parity.json")).unwrap(),
-    )
-    .unwrap();
-    let inputs = flatten_f32(&fixture["inputs"]);
-    let expected = flatten_f32(&fixture["outputs"]);
-    let n = expected.len() / 2;
-    assert!(n >= 32, "fixture has {n} cases");
-    assert_eq!(inputs.len(), n * 10 * 2);
-    let got = m.predict_raw(&inputs, n).unwrap();
-    let worst = got
-        .iter()
-        .zip(&expected)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
-    assert!(worst <= 1e-5, "largest difference {worst}");
-
-    // The same through the MotionModel interface (f64 histories), one batch.
-    let mut h = Histories::new(n, 10);
-    for i in 0..n {
-        let tr = h.track_mut(i);
-        for (t, v) in tr.iter_mut().enumerate() {
-            *v = inputs[i * 20 + t] as f64;
-        }
-    }
-    let mut out = vec![Enu2::zeros(); n];
-    m.predict(&h, &mut out).unwrap();
-    for i in 0..n {
-        assert!((out[i].x - expected[2 * i] as f64).abs() <= 1e-5);
-        assert!((out[i].y - expected[2 * i + 1] as f64).abs() <= 1e-5);
-    }
-}
-
-/// The outdoor model (workspace normalisation, displacement output) reproduces its PyTorch
-/// fixture too: within 1e-5 m plus two float32 roundings of the largest coordinate it reads
-/// (positions up to ~1.5 km, where one rounding is 1.2e-4 m; `training/fast_graph.py`
-/// checks the same tolerance when it writes the graph).
-#[test]
-fn the_outdoor_model_matches_pytorch_within_float32_rounding() {
-    let mut c = Config::load(&root().join("config/outdoor.toml")).unwrap();
-    c.motion.dmmn_model = root().join("models/outdoor/dmmn.onnx");
-    let mut m = Dmmn::load(&c.motion.dmmn_model, &c.motion_params()).unwrap();
-    let fixture: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(root().join("models/outdoor/dmmn_parity.json")).unwrap(),
-    )
-    .unwrap();
-    let inputs = flatten_f32(&fixture["inputs"]);
-    let expected = flatten_f32(&fixture["outputs"]);
-    let n = expected.len() / 2;
-    assert!(n >= 32, "fixture has {n} cases");
-    let largest = inputs.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-    let ulp = f32::from_bits(largest.to_bits() + 1) - largest;
-    let tolerance = 1e-5 + 2.0 * ulp;
-    let got = m.predict_raw(&inputs, n).unwrap();
-    let worst = got
-        .iter()
-        .zip(&expected)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
-    assert!(
-        worst <= tolerance,
-        "largest difference {worst} m, tolerance {tolerance} m"
-    );
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! `infotrack calibrate`: a camera calibration from chessboard views (a folder of images or
 //! a live camera), written as the OpenCV YAML that `daemon.calibration` reads.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use infotrack::vision::calibration::{self, Board, Calibration};
@@ -11,29 +11,7 @@ use infotrack::vision::image::GrayImage;
 
 use super::detect::image_files;
 
-/// `infotrack calibrate` arguments.
-#[derive(clap::Args)]
-pub struct CalibrateArgs {
-    /// A folder of chessboard images (sorted by name), or a live camera (`v4l2:0`,
-    /// `/dev/video0`, `gst:... ! appsink`) or video file to take `--frames` views from.
-    source: String,
-    /// Inner corners of the board, COLSxROWS (e.g. `9x6` for a board of 10 x 7 squares).
-    #[arg(long)]
-    board: String,
-    /// Side of one square, m (measure the printed board).
-    #[arg(long)]
-    square_m: f64,
-    /// The calibration file to write (OpenCV YAML: image_width, image_height,
-    /// camera_matrix, distortion_coefficients).
-    #[arg(long)]
-    out: PathBuf,
-    /// From a camera: views to take (move the board between them).
-    #[arg(long, default_value_t = 20)]
-    frames: usize,
-    /// From a camera: seconds between two views.
-    #[arg(long, default_value_t = 1.0, value_parser = super::numbers::seconds)]
-    every_s: f64,
-}
+pub use super::calibrate_args::CalibrateArgs;
 
 /// Runs `infotrack calibrate`.
 pub fn run(a: CalibrateArgs) -> Result<()> {

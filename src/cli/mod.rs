@@ -4,8 +4,11 @@
 pub mod altitude_bench;
 pub mod bench;
 pub mod bench_cmd;
+#[cfg(feature = "opencv")]
 pub mod calibrate;
+pub mod calibrate_args;
 pub mod dataset_cmd;
+#[cfg(feature = "opencv")]
 pub mod detect;
 pub mod detect_bench;
 pub mod flight_figures;

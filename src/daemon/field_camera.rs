@@ -6,12 +6,26 @@ use std::time::Duration;
 use super::pipeline::{PipelineError, Shared};
 use crate::config::Config;
 use crate::tracker::Prior;
-use crate::vision::camera_model::{CameraModel, CameraMount, VehiclePoseNed};
+#[cfg(feature = "opencv")]
+use crate::vision::camera_model::CameraMount;
+use crate::vision::camera_model::{CameraModel, VehiclePoseNed};
+#[cfg(feature = "opencv")]
 use crate::vision::capture::{Camera, CaptureConfig};
 use crate::vision::detector::{AprilTagDetector, RoiPx, RoiSearch};
 use crate::vision::projection::{measure_tag, ProjectionNoise};
 use crate::vision::VisionStats;
 use crate::world::geometry::Enu2;
+
+/// A build without OpenCV has no capture: a camera that cannot be made.
+#[cfg(not(feature = "opencv"))]
+enum Camera {}
+
+#[cfg(not(feature = "opencv"))]
+impl Camera {
+    fn latest(&mut self) -> Option<crate::vision::image::Frame> {
+        match *self {}
+    }
+}
 
 /// A real camera: frames from capture, projected with the pose at their capture time.
 pub(super) struct FieldCamera {
@@ -31,6 +45,20 @@ impl FieldCamera {
         self.last_image.as_ref()
     }
 
+    /// Without OpenCV there is no capture and no calibration file reader: a real camera is
+    /// refused, naming it and why.
+    #[cfg(not(feature = "opencv"))]
+    pub(super) fn open(cfg: &Config) -> Result<Self, PipelineError> {
+        Err(crate::vision::VisionError::Camera {
+            camera: cfg.daemon.camera.clone(),
+            message: "this infotrack was built without OpenCV (its `opencv` feature), which \
+                      a real camera needs; it flies the synthetic camera only"
+                .into(),
+        }
+        .into())
+    }
+
+    #[cfg(feature = "opencv")]
     pub(super) fn open(cfg: &Config) -> Result<Self, PipelineError> {
         let d = &cfg.daemon;
         let calib = d

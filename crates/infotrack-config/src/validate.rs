@@ -131,7 +131,7 @@ fn validate_daemon(c: &Config) -> Result<(), ConfigError> {
         })?,
     }
     if d.camera != "synthetic" {
-        infotrack_vision::capture::CaptureSource::parse(&d.camera)
+        infotrack_vision::capture_source::CaptureSource::parse(&d.camera)
             .map_err(|e| invalid("daemon.camera", &d.camera, &e.to_string()))?;
         if d.calibration.is_none() {
             return Err(invalid(

@@ -3,17 +3,25 @@
 //! covariance, and a synthetic camera that renders what the camera would see so that the
 //! simulator can run the whole loop through the real detector.
 //!
-//! The geometry (`camera_model`, `projection`, `render`) is pure; OpenCV is confined to
-//! `cv_io` and `capture`.
+//! The geometry (`camera_model`, `projection`), the detector and the capture settings are
+//! pure Rust and the AprilTag C library; OpenCV is confined to `cv_io`, `capture`,
+//! `calibration` and `pose_file`, behind the default feature `opencv`. A build without it
+//! (for a board whose OpenCV is not at hand: the arm64 cross build) still detects tags in
+//! rendered frames and flies the simulator; a real camera and calibration need it.
 #![deny(missing_docs)]
 
+#[cfg(feature = "opencv")]
 pub mod calibration;
 pub mod camera_model;
+#[cfg(feature = "opencv")]
 pub mod capture;
+pub mod capture_source;
+#[cfg(feature = "opencv")]
 pub mod cv_io;
 
 pub mod detector;
 pub mod image;
+#[cfg(feature = "opencv")]
 pub mod pose_file;
 pub mod projection;
 pub mod tag_family;
