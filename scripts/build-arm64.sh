@@ -7,7 +7,9 @@
 #   bash scripts/build-arm64.sh --test   # and runs, under qemu: the core's tests, the
 #                                        # detector's, the DMMN's parity with PyTorch on arm64
 #                                        # ONNX Runtime, and a 30 s closed loop on the mock
-#   bash scripts/build-arm64.sh --deb    # and packs infotrack_VERSION_arm64.deb
+#   bash scripts/build-arm64.sh --deb    # and packs infotrack_VERSION_arm64.deb; with --test
+#                                        # also flies its program, and installs, flies,
+#                                        # upgrades and removes it under systemd
 #   --profile NAME                       # a Cargo profile other than release (the test
 #                                        # command's arm64-check builds in a third the time)
 #
@@ -161,5 +163,16 @@ if $deb; then
       --seed 1 --duration 20 --quiet)
     rm -rf "$root"
     echo "build-arm64: the package's program flew the outdoor world's closed loop" >&2
+    # Installed for real: dpkg -i beside this machine's arm64 libraries in a booted systemd,
+    # the unit flying the mock, an upgrade, dpkg -r and -P (tests/install_systemd.rs; the
+    # kernel runs the arm64 program through qemu-user's binfmt_misc handler).
+    version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
+    next=$(bash scripts/build-deb.sh --fast --arch arm64 --binary "$binary" \
+      --onnxruntime "$ort_lib" --version "$version+1" --out target/debian-test-arm64)
+    (unset PKG_CONFIG_ALLOW_CROSS PKG_CONFIG_SYSROOT_DIR PKG_CONFIG_LIBDIR
+      INFOTRACK_ARM64_DEB="$PWD/$package" INFOTRACK_ARM64_DEB_NEXT="$PWD/$next" \
+        cargo test --release --locked --workspace --test install_systemd -- --ignored \
+        --exact the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation)
+    echo "build-arm64: the package installed, flew the mock under systemd, upgraded and was removed" >&2
   fi
 fi

@@ -240,6 +240,81 @@ fn the_debian_package_installs_flies_upgrades_and_removes_cleanly() {
     let version = env!("CARGO_PKG_VERSION");
     let (first, next) = (build_deb(version), build_deb(&format!("{version}+1")));
     let m = Machine::boot();
+    install_fly_upgrade_remove(&m, &first, &next, version);
+}
+
+/// The arm64 package (`scripts/build-arm64.sh --test --deb` builds it and runs this test),
+/// installed with dpkg beside the machine's arm64 libraries (multiarch), its program run by
+/// qemu-user through the kernel's binfmt_misc handler as a board would run it natively.
+/// ONNX Runtime reads the CPU's description from /proc/cpuinfo, which emulation leaves the
+/// host's: the machine sees a Cortex-A72's (a Raspberry Pi 4's core).
+#[test]
+#[ignore = "needs the arm64 packages: run by scripts/build-arm64.sh --test --deb"]
+fn the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation() {
+    let deb = |var: &str| {
+        std::env::var(var).unwrap_or_else(|_| panic!("{var}: the arm64 package's path"))
+    };
+    let (first, next) = (deb("INFOTRACK_ARM64_DEB"), deb("INFOTRACK_ARM64_DEB_NEXT"));
+    let version = env!("CARGO_PKG_VERSION");
+    let m = Machine::boot();
+    let handler = Arm64Handler::register(&m);
+    m.must(&format!(
+        "printf '%s' '{CORTEX_A72_CPUINFO}' > /var/tmp/cpuinfo-a72"
+    ));
+    m.must("mount --bind /var/tmp/cpuinfo-a72 /proc/cpuinfo");
+    install_fly_upgrade_remove(&m, &first, &next, version);
+    let arch = m.must(&format!("dpkg-deb -f {first} Architecture"));
+    assert_eq!(arch.trim(), "arm64");
+    drop(handler);
+}
+
+/// /proc/cpuinfo of a Raspberry Pi 4 (one Cortex-A72 core is enough for ONNX Runtime).
+const CORTEX_A72_CPUINFO: &str = "processor\t: 0\nBogoMIPS\t: 108.00\nFeatures\t: fp asimd evtstrm crc32 cpuid\nCPU implementer\t: 0x41\nCPU architecture: 8\nCPU variant\t: 0x0\nCPU part\t: 0xd08\nCPU revision\t: 3\n";
+
+/// qemu-aarch64 registered with the kernel as the handler of arm64 programs (flag F: the
+/// kernel holds the interpreter open, so it works in any root); unregistered on drop if this
+/// registered it. Registered from inside the machine, after its boot (systemd-binfmt
+/// flushes the handlers when it starts).
+struct Arm64Handler<'a> {
+    machine: &'a Machine,
+    registered_here: bool,
+}
+
+impl<'a> Arm64Handler<'a> {
+    const ENTRY: &'static str = "/proc/sys/fs/binfmt_misc/qemu-aarch64";
+
+    fn register(m: &'a Machine) -> Self {
+        m.must("mountpoint -q /proc/sys/fs/binfmt_misc || mount -t binfmt_misc binfmt_misc /proc/sys/fs/binfmt_misc");
+        if m.sh(&format!("test -e {}", Self::ENTRY)).0 {
+            return Self {
+                machine: m,
+                registered_here: false,
+            };
+        }
+        let magic = r"\x7fELF\x02\x01\x01\x00\x00\x00\x00\x00\x00\x00\x00\x00\x02\x00\xb7\x00";
+        let mask =
+            r"\xff\xff\xff\xff\xff\xff\xff\x00\xff\xff\xff\xff\xff\xff\xff\xff\xfe\xff\xff\xff";
+        m.must(&format!(
+            "printf '%s' ':qemu-aarch64:M::{magic}:{mask}:/usr/bin/qemu-aarch64:F' > /proc/sys/fs/binfmt_misc/register"
+        ));
+        Self {
+            machine: m,
+            registered_here: true,
+        }
+    }
+}
+
+impl Drop for Arm64Handler<'_> {
+    fn drop(&mut self) {
+        if self.registered_here {
+            let _ = self.machine.sh(&format!("echo -1 > {}", Self::ENTRY));
+        }
+    }
+}
+
+/// `dpkg -i` of `first`, the unit flying the lab, an upgrade to `next` that keeps an edited
+/// conffile, then `dpkg -r` and `dpkg -P`.
+fn install_fly_upgrade_remove(m: &Machine, first: &str, next: &str, version: &str) {
     m.must(&format!("dpkg -i {first}"));
     let said =
         m.must("infotrack --version; id -nG infotrack; stat -c %U /var/lib/infotrack/flights");
@@ -252,11 +327,11 @@ fn the_debian_package_installs_flies_upgrades_and_removes_cleanly() {
     m.must(
         "mkdir -p /etc/systemd/system/infotrack.service.d && printf '[Service]\\nExecStart=\\nExecStart=/usr/bin/infotrack run --config /etc/infotrack/config/default.toml --duration 0 --quiet --log-dir /var/lib/infotrack/flights\\n' > /etc/systemd/system/infotrack.service.d/lab.conf && systemctl daemon-reload && systemctl start infotrack",
     );
-    m.wait_for("the packaged unit tracking", 90, || {
-        journal(&m).contains("infotrack: tracking started")
+    m.wait_for("the packaged unit tracking", 240, || {
+        journal(m).contains("infotrack: tracking started")
     });
     m.must("systemctl stop infotrack");
-    assert!(journal(&m).contains("ended in HOLD"), "{}", journal(&m));
+    assert!(journal(m).contains("ended in HOLD"), "{}", journal(m));
     // An upgrade keeps the operator's edit of a conffile.
     m.must("echo '# the operator was here' >> /etc/infotrack/config/px4.toml");
     m.must(&format!("dpkg -i --force-confold {next}"));
