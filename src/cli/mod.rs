@@ -22,6 +22,7 @@ pub mod report_cmd;
 pub mod run_cmd;
 pub mod sim_cmd;
 pub mod world_cmd;
+pub mod world_learn;
 
 use std::path::Path;
 

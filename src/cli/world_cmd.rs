@@ -24,6 +24,10 @@ pub enum WorldAction {
     /// over roads as occlusions, the box as the geofence; writes NAME.geojson and a config
     /// NAME.toml beside it with the field settings of config/outdoor.toml.
     Import(ImportArgs),
+    /// Learn a world's turn probabilities from recorded tracks of its traffic: each track is
+    /// matched to the roads, the turns it takes counted, and the counts update the map's
+    /// probabilities; writes NAME.geojson and NAME.toml beside the config.
+    Learn(super::world_learn::LearnArgs),
 }
 
 /// `infotrack world import`.
@@ -50,6 +54,7 @@ const TEMPLATE: &str = include_str!("../../config/outdoor.toml");
 pub fn world(a: WorldArgs) -> Result<()> {
     match a.action {
         WorldAction::Import(i) => import(i),
+        WorldAction::Learn(l) => super::world_learn::learn(l),
     }
 }
 

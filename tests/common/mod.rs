@@ -184,6 +184,16 @@ pub fn lab_config_with(dir: &std::path::Path, key: &str, value: toml::Value) -> 
     path
 }
 
+/// This build's `infotrack` with `args`, run from the project's folder (where the shipped
+/// configs and fixtures are), to its end.
+pub fn infotrack_in_project(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_infotrack"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the binary runs")
+}
+
 /// A finished process's exit code, stdout and stderr, for assertions and their messages.
 pub fn output_text(o: &std::process::Output) -> String {
     format!(

@@ -6,9 +6,11 @@ use super::geometry::Enu2;
 use serde::{Deserialize, Serialize};
 
 mod check;
+mod learn;
 mod nearby;
 mod route;
 mod traffic;
+pub use learn::TurnCounts;
 pub use route::RoadPath;
 pub use traffic::RoadWeighting;
 

@@ -600,3 +600,126 @@ fn a_road_config_naming_a_missing_node_is_an_error_not_a_panic() {
     );
     assert_eq!(RoadNetwork::try_from(&config(1, 0)).unwrap().nodes.len(), 2);
 }
+
+/// A fork: 0 -> 1 (east), at 1 on east to 2 or north to 3, both on to 4; at 0 also a spur
+/// south to 5. `p_east` is the probability of going on east at 1.
+fn learning_fork(p_east: f64) -> RoadNetwork {
+    let node = |id: u32, x_m: f64, y_m: f64| NodeConfig { id, x_m, y_m };
+    let edge = |from: u32, to: u32, p: f64| EdgeConfig { from, to, p };
+    RoadNetwork::from_config(&RoadConfig {
+        nodes: vec![
+            node(0, 0.0, 0.0),
+            node(1, 200.0, 0.0),
+            node(2, 400.0, 0.0),
+            node(3, 200.0, 200.0),
+            node(4, 400.0, 200.0),
+            node(5, 0.0, -200.0),
+        ],
+        edges: vec![
+            edge(0, 1, 0.5),
+            edge(0, 5, 0.5),
+            edge(1, 2, p_east),
+            edge(1, 3, 1.0 - p_east),
+            edge(2, 4, 1.0),
+            edge(3, 4, 1.0),
+        ],
+        start_node: 0,
+    })
+    .unwrap()
+}
+
+/// Cars that drive the fork with `p_east`, sampled each second at 10 m/s with up to 3 m of
+/// noise across and along, from 10 m past node 0.
+fn learning_fork_tracks(p_east: f64, n: usize, seed: u64) -> Vec<Vec<(f64, Enu2)>> {
+    let truth = learning_fork(p_east);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let distances: Vec<f64> = (0..44).map(|k| 10.0 * k as f64).collect();
+    (0..n)
+        .map(|_| {
+            let route = truth
+                .drive(
+                    &Enu2::new(10.0, 0.0),
+                    Some(Enu2::new(1.0, 0.0)),
+                    &distances,
+                    &mut rng,
+                )
+                .unwrap();
+            route
+                .iter()
+                .enumerate()
+                .map(|(k, (p, _))| {
+                    let noise = Enu2::new(rng.gen_range(-3.0..3.0), rng.gen_range(-3.0..3.0));
+                    (k as f64, p + noise)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn turn_probabilities_learned_from_tracks_approach_the_cars_own() {
+    let map = learning_fork(0.5);
+    let tracks = learning_fork_tracks(0.8, 300, 5);
+    let (counts, _) = map.count_turns(&tracks, 15.0);
+    assert_eq!(counts.counts[1].iter().sum::<u32>(), 300, "{counts:?}");
+    assert_eq!(counts.off_road_samples, 0);
+    assert_eq!(counts.turn_backs, 0);
+    let learned = map.learned_probabilities(&counts, 2.0);
+    assert!((learned[1][0] - 0.8).abs() < 0.06, "{:?}", learned[1]);
+    assert!((learned[1].iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    // Every car went on to 4 from 2 or 3: those have one exit and keep it.
+    assert_eq!(learned[2], vec![1.0]);
+    // No car was seen to choose at node 0 (every track starts past it): the map's.
+    assert_eq!(counts.counts[0], vec![0, 0]);
+    assert_eq!(learned[0], vec![0.5, 0.5]);
+}
+
+#[test]
+fn few_tracks_move_the_maps_probabilities_only_by_what_they_show() {
+    let map = learning_fork(0.5);
+    let tracks = learning_fork_tracks(1.0, 2, 6);
+    let (counts, _) = map.count_turns(&tracks, 15.0);
+    let learned = map.learned_probabilities(&counts, 2.0);
+    // Two cars east: (2 + 2 x 0.5) / (2 + 2) = 0.75; north keeps a quarter.
+    assert_eq!(counts.counts[1], vec![2, 0]);
+    assert!((learned[1][0] - 0.75).abs() < 1e-12 && (learned[1][1] - 0.25).abs() < 1e-12);
+}
+
+#[test]
+fn a_car_that_turns_back_on_a_two_way_street_is_counted_turning_back() {
+    let node = |id: u32, x_m: f64| NodeConfig { id, x_m, y_m: 0.0 };
+    let edge = |from: u32, to: u32| EdgeConfig { from, to, p: 1.0 };
+    let map = RoadNetwork::from_config(&RoadConfig {
+        nodes: vec![node(0, 0.0), node(1, 200.0)],
+        edges: vec![edge(0, 1), edge(1, 0)],
+        start_node: 0,
+    })
+    .unwrap();
+    // East at 10 m/s to x = 190, back west to x = 20.
+    let xs: Vec<f64> = (1..=19)
+        .chain((2..19).rev())
+        .map(|k| 10.0 * k as f64)
+        .collect();
+    let track: Vec<(f64, Enu2)> = xs
+        .iter()
+        .enumerate()
+        .map(|(k, x)| (k as f64, Enu2::new(*x, 1.0)))
+        .collect();
+    let (counts, sequences) = map.count_turns(&[track], 15.0);
+    assert_eq!(sequences, vec![vec![0, 1, 0]]);
+    assert_eq!(counts.counts[1], vec![1]);
+    assert_eq!(counts.turn_backs, 1);
+}
+
+#[test]
+fn samples_far_from_every_road_are_not_matched_and_break_the_stretch() {
+    let map = learning_fork(0.5);
+    let mut track = learning_fork_tracks(1.0, 1, 7).remove(0);
+    // Samples 10-14 jump 100 m south of the road (the recording lost its fix).
+    for s in &mut track[10..15] {
+        s.1.y -= 100.0;
+    }
+    let (counts, sequences) = map.count_turns(&[track], 15.0);
+    assert!(counts.off_road_samples >= 4, "{counts:?}");
+    assert_eq!(sequences.len(), 2, "{sequences:?}");
+}
