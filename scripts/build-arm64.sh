@@ -12,6 +12,8 @@
 #                                        # upgrades and removes it under systemd
 #   --profile NAME                       # a Cargo profile other than release (the test
 #                                        # command's arm64-check builds in a third the time)
+#   --no-opencv                          # without OpenCV: no arm64 root to extract, and a
+#                                        # program that refuses a real camera
 #
 # Exit status 3: what it needs could not be installed here (no arm64 packages, no Rust
 # target, no mount namespaces); it says what, and the test command reports the arm64 suite
@@ -22,21 +24,23 @@
 # and ONNX Runtime for arm64 from the same PyPI package as the amd64 build, into
 # .deps/onnxruntime-arm64/.
 #
-# The arm64 program is built without OpenCV (`--no-default-features`): Debian's arm64
-# OpenCV development packages cannot be installed beside the amd64 ones on one machine.
-# It flies the simulator and the mock through the synthetic camera and the same AprilTag
-# detector, and refuses a real camera, `detect` and `calibrate`, saying why. A real camera
-# on the board needs a build with OpenCV, on the board itself (`cargo build --release`).
+# The arm64 program links Debian's arm64 OpenCV from an arm64 root extracted beside the
+# project (scripts/arm64-sysroot.sh, .deps/arm64-sysroot): Debian's arm64 OpenCV development
+# packages cannot be installed beside the amd64 ones on one machine. Its package depends on
+# the board's own OpenCV packages. Under qemu the programs run on that root's loader and
+# libraries. With --no-opencv it is built without (`--no-default-features`) and refuses a
+# real camera, `detect` and `calibrate`, saying why.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-test=false deb=false profile=release
+test=false deb=false profile=release opencv=true
 while [ $# -gt 0 ]; do
   case "$1" in
     --test) test=true; shift ;;
     --deb) deb=true; shift ;;
     --profile) profile="$2"; shift 2 ;;
-    *) echo "build-arm64: unknown option $1 (--test, --deb, --profile NAME)" >&2; exit 2 ;;
+    --no-opencv) opencv=false; shift ;;
+    *) echo "build-arm64: unknown option $1 (--test, --deb, --profile NAME, --no-opencv)" >&2; exit 2 ;;
   esac
 done
 cannot() { echo "build-arm64: cannot $*" >&2; exit 3; }
@@ -90,22 +94,45 @@ PY
   rm -rf "$tmp"
 fi
 
-# The cross compilers and the arm64 pkg-config files.
-export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc
+# The cross compilers and the arm64 pkg-config files: the arm64 root's with OpenCV, else
+# this machine's multiarch ones.
 export CC_aarch64_unknown_linux_gnu=aarch64-linux-gnu-gcc
 export CXX_aarch64_unknown_linux_gnu=aarch64-linux-gnu-g++
 export AR_aarch64_unknown_linux_gnu=aarch64-linux-gnu-ar
-export PKG_CONFIG_ALLOW_CROSS=1 PKG_CONFIG_SYSROOT_DIR=/
-export PKG_CONFIG_LIBDIR=/usr/lib/aarch64-linux-gnu/pkgconfig:/usr/share/pkgconfig
+export PKG_CONFIG_ALLOW_CROSS=1
+sysroot_dir="$PWD/.deps/arm64-sysroot"
+sysroot="$sysroot_dir/root"
+features=()
+if $opencv; then
+  status=0
+  bash scripts/arm64-sysroot.sh "$sysroot_dir" || status=$?
+  [ "$status" -eq 0 ] || exit "$status"
+  export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER="$sysroot_dir/gcc"
+  export PKG_CONFIG_SYSROOT_DIR="$sysroot"
+  export PKG_CONFIG_LIBDIR="$sysroot/usr/lib/aarch64-linux-gnu/pkgconfig:$sysroot/usr/share/pkgconfig"
+else
+  features=(--no-default-features)
+  export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc
+  export PKG_CONFIG_SYSROOT_DIR=/
+  export PKG_CONFIG_LIBDIR=/usr/lib/aarch64-linux-gnu/pkgconfig:/usr/share/pkgconfig
+fi
 
-cargo build --profile "$profile" --locked --target "$target" --no-default-features --bin infotrack
+cargo build --profile "$profile" --locked --target "$target" "${features[@]}" --bin infotrack
 binary="target/$target/$profile/infotrack"
 echo "build-arm64: $binary" >&2
 
-# Runs an arm64 program under qemu as a Raspberry Pi 4 core, with the arm64 libraries
-# installed beside this machine's own (/lib/aarch64-linux-gnu). ONNX Runtime reads the CPU's
-# description from /proc/cpuinfo, which qemu-user leaves the host's (x86-64), and crashes on
-# it; the program runs in a private mount namespace that sees a Cortex-A72's instead.
+# Runs an arm64 program under qemu as a Raspberry Pi 4 core: with OpenCV on the arm64
+# root's loader and libraries (QEMU_LD_PREFIX, which programs it starts inherit), else on
+# the arm64 libraries installed beside this machine's own (/lib/aarch64-linux-gnu). ONNX
+# Runtime reads the CPU's description from /proc/cpuinfo, which qemu-user leaves the host's
+# (x86-64), and crashes on it; the program runs in a private mount namespace that sees a
+# Cortex-A72's instead.
+export QEMU_CPU=cortex-a72 qemu_library_path=""
+if $opencv; then
+  export QEMU_LD_PREFIX="$sysroot"
+  qemu_library_path=$(cat "$sysroot_dir/library-path")
+fi
+export qemu_library_path
 as_pi4() {
   local cpuinfo
   cpuinfo=$(mktemp)
@@ -114,17 +141,36 @@ as_pi4() {
     printf 'CPU implementer\t: 0x41\nCPU architecture: 8\nCPU variant\t: 0x0\n'
     printf 'CPU part\t: 0xd08\nCPU revision\t: 3\n\n'
   done >"$cpuinfo"
-  QEMU_CPU=cortex-a72 ORT_DYLIB_PATH="$ort_lib" \
+  env ${ort_lib:+ORT_DYLIB_PATH="$ort_lib"} \
     unshare --mount sh -c 'mount --bind "$0" /proc/cpuinfo && exec qemu-aarch64 "$@"' \
-    "$cpuinfo" "$@"
+    "$cpuinfo" ${qemu_library_path:+-E "LD_LIBRARY_PATH=$qemu_library_path"} "$@"
   local status=$?
   rm -f "$cpuinfo"
   return "$status"
 }
 
+# qemu-aarch64 as the kernel's handler of arm64 programs (binfmt_misc; flag F: the kernel
+# holds the interpreter open); removed again by unregister_arm64_handler if this added it.
+handler=/proc/sys/fs/binfmt_misc/qemu-aarch64 registered_handler=false
+register_arm64_handler() {
+  mountpoint -q /proc/sys/fs/binfmt_misc ||
+    mount -t binfmt_misc binfmt_misc /proc/sys/fs/binfmt_misc ||
+    cannot "mount binfmt_misc (as root) to run arm64 programs a test starts"
+  [ -e "$handler" ] && return 0
+  printf '%s' ':qemu-aarch64:M::\x7fELF\x02\x01\x01\x00\x00\x00\x00\x00\x00\x00\x00\x00\x02\x00\xb7\x00:\xff\xff\xff\xff\xff\xff\xff\x00\xff\xff\xff\xff\xff\xff\xff\xff\xfe\xff\xff\xff:/usr/bin/qemu-aarch64:F' \
+    >/proc/sys/fs/binfmt_misc/register || cannot "register qemu-aarch64 with binfmt_misc"
+  registered_handler=true
+  trap unregister_arm64_handler EXIT
+}
+unregister_arm64_handler() {
+  if $registered_handler && [ -e "$handler" ]; then echo -1 >"$handler"; fi
+  registered_handler=false
+}
+
 if $test; then
-  # The core's tests, the detector's (the vision crate without OpenCV) and the DMMN's
-  # parity, built as arm64 test programs; cargo runs each through as_pi4.
+  # The core's tests, the detector's and the camera's (the vision crate, with OpenCV unless
+  # --no-opencv) and the DMMN's parity, built as arm64 test programs; cargo runs each
+  # through as_pi4.
   export -f as_pi4
   export ort_lib
   runner=$(mktemp)
@@ -132,9 +178,18 @@ if $test; then
   chmod +x "$runner"
   unshare --mount true 2>/dev/null || cannot "make a mount namespace (unshare --mount, as root)"
   CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="$runner" cargo test --profile "$profile" \
-    --locked --target "$target" -p infotrack-core -p infotrack-vision --no-default-features
+    --locked --target "$target" -p infotrack-core -p infotrack-vision "${features[@]}"
   CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="$runner" cargo test --profile "$profile" \
     --locked --target "$target" -p infotrack-dmmn --test parity
+  if $opencv; then
+    # The program's `detect` and `calibrate` through arm64 OpenCV: the tests render tags and
+    # chessboards and run the program on them. It starts as their child, so the kernel
+    # must hand arm64 programs to qemu (binfmt_misc), for the while of these tests.
+    register_arm64_handler
+    CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER="$runner" cargo test --profile "$profile" \
+      --locked --target "$target" -p infotrack --test detect_cli --test calibrate_cli
+    unregister_arm64_handler
+  fi
   rm -f "$runner"
   # A 30 s closed loop on the mock: the daemon, its MAVLink link and the mock on loopback,
   # the synthetic camera through the detector, the DMMN, EER; the lab on a simulated clock.
@@ -151,9 +206,33 @@ PY
 fi
 
 if $deb; then
-  package=$(bash scripts/build-deb.sh --arch arm64 --binary "$binary" --onnxruntime "$ort_lib")
+  from_root=()
+  $opencv && from_root=(--sysroot "$sysroot")
+  package=$(bash scripts/build-deb.sh --arch arm64 --binary "$binary" --onnxruntime "$ort_lib" \
+    "${from_root[@]}")
   echo "build-arm64: $package" >&2
-  if $test; then
+  if $test && $opencv; then
+    # apt installs the package on a fresh arm64 Debian 12 (its dependencies resolved from
+    # this machine's apt sources, as on the board: mmdebstrap, unpacked, no scripts run),
+    # and the program it installed flies from there: its loader, its OpenCV, its ONNX
+    # Runtime, its configs and models.
+    board=$(mktemp -d)
+    # The package at the same path here and inside the new root, where apt reads it.
+    cp "$package" "$board/"
+    printf '%s\n' "$(cat /etc/apt/sources.list.d/*.sources /etc/apt/sources.list 2>/dev/null)" |
+      mmdebstrap --quiet --variant=extract --architectures=arm64 \
+        --setup-hook="mkdir -p \"\$1$board\" && cp $board/$(basename "$package") \"\$1$board/\"" \
+        --include="$board/$(basename "$package")" bookworm "$board/root" - ||
+      { echo "build-arm64: apt could not install $package on arm64 Debian 12" >&2; exit 1; }
+    board_libraries=$(find "$board/root" \( -name 'lib*.so.*' -o -name 'lib*.so' \) -printf '%h\n' |
+      sort -u | paste -sd:)
+    (cd "$board/root/etc/infotrack" && QEMU_LD_PREFIX="$board/root" \
+      qemu_library_path="$board_libraries" ort_lib="" \
+      as_pi4 "$board/root/usr/bin/infotrack" sim --closed-loop --config config/outdoor.toml \
+      --seed 1 --duration 20 --quiet)
+    rm -rf "$board"
+    echo "build-arm64: apt installed the package on arm64 Debian 12; its program flew the outdoor closed loop" >&2
+  elif $test; then
     # What the package installs flies: its program, with the ONNX Runtime and the models
     # and configs it carries, unpacked into a folder (dpkg -x) and run under qemu.
     root=$(mktemp -d)
@@ -165,7 +244,9 @@ if $deb; then
     echo "build-arm64: the package's program flew the outdoor world's closed loop" >&2
     # Installed for real: dpkg -i beside this machine's arm64 libraries in a booted systemd,
     # the unit flying the mock, an upgrade, dpkg -r and -P (tests/install_systemd.rs; the
-    # kernel runs the arm64 program through qemu-user's binfmt_misc handler).
+    # kernel runs the arm64 program through qemu-user's binfmt_misc handler). Without
+    # OpenCV only: the package with OpenCV needs the arm64 OpenCV, which cannot be installed
+    # beside this machine's amd64 one.
     version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
     next=$(bash scripts/build-deb.sh --fast --arch arm64 --binary "$binary" \
       --onnxruntime "$ort_lib" --version "$version+1" --out target/debian-test-arm64)

@@ -5,12 +5,14 @@
 # with the scripts that create the user `infotrack` and remove it on purge.
 #
 #   bash scripts/build-deb.sh [--binary FILE] [--version V] [--out DIR] [--fast]
-#                             [--arch ARCH --onnxruntime FILE]
+#                             [--arch ARCH --onnxruntime FILE [--sysroot DIR]]
 #
 # --fast packs with gzip instead of xz (tests: seconds instead of half a minute).
 # --arch arm64 packs a cross-built program (scripts/build-arm64.sh --deb does) with its
 # architecture's ONNX Runtime; its dependencies come from the arm64 libraries installed
-# beside this machine's own (dpkg multiarch).
+# beside this machine's own (dpkg multiarch), or with --sysroot from the packages an arm64
+# root was extracted from (scripts/arm64-sysroot.sh keeps them in DIR/var/cache/apt/archives):
+# each library the program needs, as its package at least at that package's upstream version.
 # Writes DIR/infotrack_V_ARCH.deb (default: target/debian/, the version Cargo's, the
 # architecture this machine's) and prints its path. Install with
 # `apt install ./infotrack_V_ARCH.deb`, then edit /etc/infotrack/config/px4.toml and
@@ -18,7 +20,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-binary="" version="" out="target/debian" compression=(-Zxz) arch="" ort=()
+binary="" version="" out="target/debian" compression=(-Zxz) arch="" ort=() sysroot=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --binary) binary="$2"; shift 2 ;;
@@ -27,7 +29,8 @@ while [ $# -gt 0 ]; do
     --fast) compression=(-Zgzip -z1); shift ;;
     --arch) arch="$2"; shift 2 ;;
     --onnxruntime) ort=(--onnxruntime "$2"); shift 2 ;;
-    *) echo "build-deb: unknown option $1 (--binary FILE, --version V, --out DIR, --fast, --arch ARCH, --onnxruntime FILE)" >&2; exit 2 ;;
+    --sysroot) sysroot="$2"; shift 2 ;;
+    *) echo "build-deb: unknown option $1 (--binary FILE, --version V, --out DIR, --fast, --arch ARCH, --onnxruntime FILE, --sysroot DIR)" >&2; exit 2 ;;
   esac
 done
 [ -n "$version" ] || version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
@@ -56,13 +59,18 @@ rmdir "$stage/etc/systemd/system" "$stage/etc/systemd" 2>/dev/null || true
 
 # What the program links to, as Debian package dependencies (dpkg-shlibdeps reads them
 # from the shared libraries' own packages). ONNX Runtime ships inside the package.
-shlibs=$(mktemp -d)
-mkdir -p "$shlibs/debian"
-printf 'Source: infotrack\n\nPackage: infotrack\nArchitecture: any\n' >"$shlibs/debian/control"
-depends=$(cd "$shlibs" && DEB_HOST_ARCH="$arch" DEB_HOST_GNU_TYPE="$triplet" \
-  DEB_HOST_MULTIARCH="$triplet" dpkg-shlibdeps -O -e"$stage/usr/lib/infotrack/infotrack" \
-  -l"$stage/usr/lib/infotrack" 2>/dev/null | sed -n 's/^shlibs:Depends=//p')
-rm -rf "$shlibs"
+if [ -n "$sysroot" ]; then
+  depends=$("${tools}objdump" -p "$stage/usr/lib/infotrack/infotrack" | sed -n 's/^ *NEEDED *//p' |
+    python3 scripts/deb-depends-from-root.py "$sysroot/var/cache/apt/archives")
+else
+  shlibs=$(mktemp -d)
+  mkdir -p "$shlibs/debian"
+  printf 'Source: infotrack\n\nPackage: infotrack\nArchitecture: any\n' >"$shlibs/debian/control"
+  depends=$(cd "$shlibs" && DEB_HOST_ARCH="$arch" DEB_HOST_GNU_TYPE="$triplet" \
+    DEB_HOST_MULTIARCH="$triplet" dpkg-shlibdeps -O -e"$stage/usr/lib/infotrack/infotrack" \
+    -l"$stage/usr/lib/infotrack" 2>/dev/null | sed -n 's/^shlibs:Depends=//p')
+  rm -rf "$shlibs"
+fi
 
 mkdir -p "$stage/DEBIAN"
 size=$(du -sk --exclude=DEBIAN "$stage" | cut -f1)

@@ -240,16 +240,18 @@ fn the_debian_package_installs_flies_upgrades_and_removes_cleanly() {
     let version = env!("CARGO_PKG_VERSION");
     let (first, next) = (build_deb(version), build_deb(&format!("{version}+1")));
     let m = Machine::boot();
-    install_fly_upgrade_remove(&m, &first, &next, version);
+    install_fly_upgrade_remove(&m, &format!("dpkg -i {first}"), &next, version);
 }
 
-/// The arm64 package (`scripts/build-arm64.sh --test --deb` builds it and runs this test),
+/// The arm64 package without OpenCV (`scripts/build-arm64.sh --no-opencv --test --deb` builds
+/// it and runs this test; with OpenCV it needs arm64 OpenCV, which cannot be installed beside
+/// this machine's amd64 one),
 /// installed with dpkg beside the machine's arm64 libraries (multiarch), its program run by
 /// qemu-user through the kernel's binfmt_misc handler as a board would run it natively.
 /// ONNX Runtime reads the CPU's description from /proc/cpuinfo, which emulation leaves the
 /// host's: the machine sees a Cortex-A72's (a Raspberry Pi 4's core).
 #[test]
-#[ignore = "needs the arm64 packages: run by scripts/build-arm64.sh --test --deb"]
+#[ignore = "needs the arm64 packages: run by scripts/build-arm64.sh --no-opencv --test --deb"]
 fn the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation() {
     let deb = |var: &str| {
         std::env::var(var).unwrap_or_else(|_| panic!("{var}: the arm64 package's path"))
@@ -262,7 +264,7 @@ fn the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation
         "printf '%s' '{CORTEX_A72_CPUINFO}' > /var/tmp/cpuinfo-a72"
     ));
     m.must("mount --bind /var/tmp/cpuinfo-a72 /proc/cpuinfo");
-    install_fly_upgrade_remove(&m, &first, &next, version);
+    install_fly_upgrade_remove(&m, &format!("dpkg -i {first}"), &next, version);
     let arch = m.must(&format!("dpkg-deb -f {first} Architecture"));
     assert_eq!(arch.trim(), "arm64");
     drop(handler);
@@ -312,10 +314,10 @@ impl Drop for Arm64Handler<'_> {
     }
 }
 
-/// `dpkg -i` of `first`, the unit flying the lab, an upgrade to `next` that keeps an edited
-/// conffile, then `dpkg -r` and `dpkg -P`.
-fn install_fly_upgrade_remove(m: &Machine, first: &str, next: &str, version: &str) {
-    m.must(&format!("dpkg -i {first}"));
+/// `install` (the first package's install command), the unit flying the lab, an upgrade to
+/// `next` that keeps an edited conffile, then `dpkg -r` and `dpkg -P`.
+fn install_fly_upgrade_remove(m: &Machine, install: &str, next: &str, version: &str) {
+    m.must(install);
     let said =
         m.must("infotrack --version; id -nG infotrack; stat -c %U /var/lib/infotrack/flights");
     assert!(said.contains(&format!("infotrack {version} (")), "{said}");
