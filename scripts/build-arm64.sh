@@ -12,6 +12,10 @@
 #                                        # upgrades and removes it under systemd
 #   --profile NAME                       # a Cargo profile other than release (the test
 #                                        # command's arm64-check builds in a third the time)
+#   --board                              # with --deb: apt installs the package on an arm64
+#                                        # Debian 12 root with its scripts run under qemu,
+#                                        # which flies as the user infotrack, then removes
+#                                        # and purges it (about five minutes; not in CI)
 #   --no-opencv                          # without OpenCV: no arm64 root to extract, and a
 #                                        # program that refuses a real camera
 #
@@ -33,16 +37,21 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-test=false deb=false profile=release opencv=true
+test=false deb=false profile=release opencv=true board_check=false
 while [ $# -gt 0 ]; do
   case "$1" in
     --test) test=true; shift ;;
     --deb) deb=true; shift ;;
     --profile) profile="$2"; shift 2 ;;
     --no-opencv) opencv=false; shift ;;
-    *) echo "build-arm64: unknown option $1 (--test, --deb, --profile NAME, --no-opencv)" >&2; exit 2 ;;
+    --board) board_check=true; shift ;;
+    *) echo "build-arm64: unknown option $1 (--test, --deb, --board, --profile NAME, --no-opencv)" >&2; exit 2 ;;
   esac
 done
+if $board_check && ! $deb; then
+  echo "build-arm64: --board installs the package: it needs --deb" >&2
+  exit 2
+fi
 cannot() { echo "build-arm64: cannot $*" >&2; exit 3; }
 
 target=aarch64-unknown-linux-gnu
@@ -157,7 +166,9 @@ register_arm64_handler() {
     mount -t binfmt_misc binfmt_misc /proc/sys/fs/binfmt_misc ||
     cannot "mount binfmt_misc (as root) to run arm64 programs a test starts"
   [ -e "$handler" ] && return 0
-  printf '%s' ':qemu-aarch64:M::\x7fELF\x02\x01\x01\x00\x00\x00\x00\x00\x00\x00\x00\x00\x02\x00\xb7\x00:\xff\xff\xff\xff\xff\xff\xff\x00\xff\xff\xff\xff\xff\xff\xff\xff\xfe\xff\xff\xff:/usr/bin/qemu-aarch64:F' \
+  local qemu=/usr/bin/qemu-aarch64
+  ${static_handler:-false} && qemu=/usr/bin/qemu-aarch64-static
+  printf '%s' ':qemu-aarch64:M::\x7fELF\x02\x01\x01\x00\x00\x00\x00\x00\x00\x00\x00\x00\x02\x00\xb7\x00:\xff\xff\xff\xff\xff\xff\xff\x00\xff\xff\xff\xff\xff\xff\xff\xff\xfe\xff\xff\xff:'"$qemu"':F' \
     >/proc/sys/fs/binfmt_misc/register || cannot "register qemu-aarch64 with binfmt_misc"
   registered_handler=true
   trap unregister_arm64_handler EXIT
@@ -256,4 +267,42 @@ if $deb; then
         --exact the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation)
     echo "build-arm64: the package installed, flew the mock under systemd, upgraded and was removed" >&2
   fi
+fi
+
+if $board_check && $deb; then
+  # The package as on a board: apt installs it on an arm64 Debian 12 (mmdebstrap's
+  # `essential` variant, every maintainer script run by the kernel through qemu-user-static,
+  # which needs no library of this machine's inside the root), it flies the outdoor closed
+  # loop as the user its script created, and dpkg removes it (keeping the configs) and
+  # purges it (leaving nothing, the user gone).
+  command -v qemu-aarch64-static >/dev/null || DEBIAN_FRONTEND=noninteractive $SUDO \
+    apt-get install -y -qq --no-install-recommends qemu-user-static >/dev/null ||
+    cannot "install Debian's qemu-user-static"
+  if [ -e "$handler" ] && ! grep -q 'qemu-aarch64-static' "$handler"; then
+    echo "build-arm64: $handler runs arm64 programs with a qemu that needs this machine's libraries; --board needs qemu-aarch64-static there" >&2
+    exit 1
+  fi
+  static_handler=true register_arm64_handler
+  board=$(mktemp -d)
+  cp "$package" "$board/"
+  printf '%s\n' "$(cat /etc/apt/sources.list.d/*.sources /etc/apt/sources.list 2>/dev/null)" |
+    mmdebstrap --quiet --variant=essential --architectures=arm64 \
+      --setup-hook="mkdir -p \"\$1$board\" && cp $board/$(basename "$package") \"\$1$board/\"" \
+      --include="$board/$(basename "$package")" bookworm "$board/root" -
+  # ONNX Runtime reads the CPU from /proc/cpuinfo: the root has no /proc mounted, so a
+  # Cortex-A72's description is a plain file there.
+  mkdir -p "$board/root/proc"
+  for n in 0 1 2 3; do
+    printf 'processor\t: %s\nFeatures\t: fp asimd evtstrm crc32 cpuid\nCPU implementer\t: 0x41\n' "$n"
+    printf 'CPU architecture: 8\nCPU variant\t: 0x0\nCPU part\t: 0xd08\nCPU revision\t: 3\n\n'
+  done >"$board/root/proc/cpuinfo"
+  chroot --userspec=infotrack:infotrack "$board/root" sh -c 'cd /etc/infotrack &&
+    infotrack sim --closed-loop --config config/outdoor.toml --seed 1 --duration 20 --quiet \
+      --out /var/lib/infotrack/flights/board-check && test -f /var/lib/infotrack/flights/board-check/summary.json'
+  chroot "$board/root" sh -c 'dpkg -r infotrack >/dev/null && ! test -e /usr/bin/infotrack &&
+    test -f /etc/infotrack/config/px4.toml && dpkg -P infotrack >/dev/null &&
+    ! test -e /etc/infotrack && ! test -e /var/lib/infotrack && ! id infotrack 2>/dev/null'
+  rm -rf "$board"
+  unregister_arm64_handler
+  echo "build-arm64: apt installed the package on arm64 Debian 12 with its scripts; it flew as infotrack; removed and purged cleanly" >&2
 fi
