@@ -142,14 +142,18 @@ if $opencv; then
   qemu_library_path=$(cat "$sysroot_dir/library-path")
 fi
 export qemu_library_path
-as_pi4() {
-  local cpuinfo
-  cpuinfo=$(mktemp)
+# /proc/cpuinfo of a Raspberry Pi 4: four Cortex-A72 cores.
+a72_cpuinfo() {
   for n in 0 1 2 3; do
     printf 'processor\t: %s\nBogoMIPS\t: 108.00\nFeatures\t: fp asimd evtstrm crc32 cpuid\n' "$n"
     printf 'CPU implementer\t: 0x41\nCPU architecture: 8\nCPU variant\t: 0x0\n'
     printf 'CPU part\t: 0xd08\nCPU revision\t: 3\n\n'
-  done >"$cpuinfo"
+  done
+}
+as_pi4() {
+  local cpuinfo
+  cpuinfo=$(mktemp)
+  a72_cpuinfo >"$cpuinfo"
   env ${ort_lib:+ORT_DYLIB_PATH="$ort_lib"} \
     unshare --mount sh -c 'mount --bind "$0" /proc/cpuinfo && exec qemu-aarch64 "$@"' \
     "$cpuinfo" ${qemu_library_path:+-E "LD_LIBRARY_PATH=$qemu_library_path"} "$@"
@@ -182,7 +186,7 @@ if $test; then
   # The core's tests, the detector's and the camera's (the vision crate, with OpenCV unless
   # --no-opencv) and the DMMN's parity, built as arm64 test programs; cargo runs each
   # through as_pi4.
-  export -f as_pi4
+  export -f as_pi4 a72_cpuinfo
   export ort_lib
   runner=$(mktemp)
   printf '#!/usr/bin/env bash\nas_pi4 "$@"\n' >"$runner"
@@ -292,10 +296,7 @@ if $board_check && $deb; then
   # ONNX Runtime reads the CPU from /proc/cpuinfo: the root has no /proc mounted, so a
   # Cortex-A72's description is a plain file there.
   mkdir -p "$board/root/proc"
-  for n in 0 1 2 3; do
-    printf 'processor\t: %s\nFeatures\t: fp asimd evtstrm crc32 cpuid\nCPU implementer\t: 0x41\n' "$n"
-    printf 'CPU architecture: 8\nCPU variant\t: 0x0\nCPU part\t: 0xd08\nCPU revision\t: 3\n\n'
-  done >"$board/root/proc/cpuinfo"
+  a72_cpuinfo >"$board/root/proc/cpuinfo"
   chroot --userspec=infotrack:infotrack "$board/root" sh -c 'cd /etc/infotrack &&
     infotrack sim --closed-loop --config config/outdoor.toml --seed 1 --duration 20 --quiet \
       --out /var/lib/infotrack/flights/board-check && test -f /var/lib/infotrack/flights/board-check/summary.json'
