@@ -8,8 +8,8 @@
 # - osmium-tool: cuts an OpenStreetMap .pbf extract to XML for SUMO's netconvert;
 # - slurm-wlm and munge: a one-node Slurm cluster (scripts/slurm-local.sh) that runs a
 #   campaign's shards as an array job (scripts/slurm-campaign.sh);
-# - .deps/mdbook: mdBook and its link check (mdbook-linkcheck2) from crates.io, pinned,
-#   which build the book in docs/ (tests/docs_book.rs).
+# - .deps/mdbook: mdBook from crates.io, pinned, which builds the book in docs/
+#   (tests/docs_book.rs, which also checks every link and anchor of the book itself).
 # Idempotent: does nothing when everything is present.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -45,7 +45,6 @@ crate_tool() { # crate_tool CRATE VERSION
   fi
 }
 crate_tool mdbook 0.5.4
-crate_tool mdbook-linkcheck2 0.13.0
 
 missing=()
 for pkg in osmium-tool slurm-wlm munge; do

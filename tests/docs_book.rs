@@ -221,10 +221,11 @@ fn the_link_check_catches_a_link_to_nothing() {
     assert_eq!(local_links(text), ["operator/nowhere.md#x", "table.md"]);
 }
 
-/// `mdbook build docs`, with its link check (mdbook-linkcheck2: every link of the book to
-/// a page), both installed into `.deps/mdbook` by `scripts/setup-tests.sh`.
+/// `mdbook build docs`, with mdBook installed into `.deps/mdbook` by
+/// `scripts/setup-tests.sh`. Its links and anchors are checked by
+/// `every_local_link_leads_to_a_file_and_its_anchor`.
 #[test]
-fn the_book_builds_and_its_links_hold() {
+fn the_book_builds() {
     let tools = root().join(".deps/mdbook/bin");
     let path = format!(
         "{}:{}",
@@ -243,10 +244,7 @@ fn the_book_builds_and_its_links_hold() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(out.status.success(), "mdbook build docs failed:\n{log}");
-    assert!(
-        log.contains("linkcheck2"),
-        "the link check did not run:\n{log}"
-    );
-    let index = root().join("target/book/html/index.html");
+    // With one renderer (HTML) mdBook writes straight into the build folder.
+    let index = root().join("target/book/index.html");
     assert!(index.exists(), "{} missing:\n{log}", index.display());
 }

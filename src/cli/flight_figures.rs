@@ -40,15 +40,19 @@ impl Resources {
         self.flown_s / self.wall_s
     }
 
-    /// The terminal's resources line.
+    /// The terminal's resources line; a figure the system would not give is "unknown".
     pub fn line(&self) -> String {
+        let memory = if self.peak_rss_mb.is_finite() {
+            format!("{:.0} MB", self.peak_rss_mb)
+        } else {
+            "unknown".to_string()
+        };
         format!(
-            "resources: {:.0}% of one core over {:.1} s of wall time for {:.1} s of flight ({:.1}x real time), peak resident memory {:.0} MB",
+            "resources: {:.0}% of one core over {:.1} s of wall time for {:.1} s of flight ({:.1}x real time), peak resident memory {memory}",
             self.cpu_percent(),
             self.wall_s,
             self.flown_s,
             self.real_time_factor(),
-            self.peak_rss_mb
         )
     }
 }
@@ -117,4 +121,33 @@ pub fn figures(r: &DaemonReport, res: &Resources) -> Value {
             "peak_resident_memory_mb": finite(res.peak_rss_mb),
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Resources;
+
+    fn resources(peak_rss_mb: f64) -> Resources {
+        Resources {
+            cpu_s: 5.0,
+            wall_s: 10.0,
+            flown_s: 20.0,
+            peak_rss_mb,
+        }
+    }
+
+    #[test]
+    fn the_resources_line_gives_the_share_of_a_core_and_memory() {
+        let line = resources(123.4).line();
+        assert!(line.contains("50% of one core"), "{line}");
+        assert!(line.contains("(2.0x real time)"), "{line}");
+        assert!(line.ends_with("peak resident memory 123 MB"), "{line}");
+    }
+
+    #[test]
+    fn memory_the_system_would_not_give_is_unknown_not_nan() {
+        let line = resources(f64::NAN).line();
+        assert!(line.ends_with("peak resident memory unknown"), "{line}");
+        assert!(!line.contains("NaN"), "{line}");
+    }
 }

@@ -417,27 +417,24 @@ fn final_summary(
     report::write_file(&path, &bytes)
 }
 
-fn cpu_seconds() -> f64 {
+/// This process's resource use so far, from the kernel (no /proc needed, so it also
+/// works in a chroot or a bare container).
+fn own_usage() -> Option<libc::rusage> {
     // SAFETY: getrusage fills the struct we own.
     unsafe {
         let mut u: libc::rusage = std::mem::zeroed();
-        if libc::getrusage(libc::RUSAGE_SELF, &mut u) != 0 {
-            return f64::NAN;
-        }
-        let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-        tv(u.ru_utime) + tv(u.ru_stime)
+        (libc::getrusage(libc::RUSAGE_SELF, &mut u) == 0).then_some(u)
     }
 }
 
+fn cpu_seconds() -> f64 {
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    own_usage().map_or(f64::NAN, |u| tv(u.ru_utime) + tv(u.ru_stime))
+}
+
+/// Peak resident memory, MB: Linux gives `ru_maxrss` in KiB.
 fn peak_rss_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(f64::NAN, |kb| kb / 1024.0)
+    own_usage().map_or(f64::NAN, |u| u.ru_maxrss as f64 / 1024.0)
 }
 
 /// Arguments of `infotrack replay`.
