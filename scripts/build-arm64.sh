@@ -3,19 +3,21 @@
 # aarch64-unknown-linux-gnu), cross-compiled on this x86-64 Debian machine, and its tests
 # run as arm64 binaries under qemu-user emulating a Raspberry Pi 4's core (Cortex-A72).
 #
-#   bash scripts/build-arm64.sh          # builds target/aarch64-unknown-linux-gnu/release/infotrack
+#   bash scripts/build-arm64.sh          # builds target/aarch64-unknown-linux-gnu/dist/infotrack
+#                                        # (Cargo's dist profile: link-time optimised)
 #   bash scripts/build-arm64.sh --test   # and runs, under qemu: the core's tests, the
 #                                        # detector's, the DMMN's parity with PyTorch on arm64
 #                                        # ONNX Runtime, and a 30 s closed loop on the mock
 #   bash scripts/build-arm64.sh --deb    # and packs infotrack_VERSION_arm64.deb; with --test
-#                                        # also flies its program, and installs, flies,
-#                                        # upgrades and removes it under systemd
-#   --profile NAME                       # a Cargo profile other than release (the test
+#                                        # also boots an arm64 Debian 12 with systemd under
+#                                        # qemu, where apt installs the package, its unit
+#                                        # flies the mock, and it is upgraded, removed and
+#                                        # purged (--no-opencv: dpkg installs it beside this
+#                                        # machine's arm64 libraries instead)
+#   --profile NAME                       # a Cargo profile other than dist (the test
 #                                        # command's arm64-check builds in a third the time)
-#   --board                              # with --deb: apt installs the package on an arm64
-#                                        # Debian 12 root with its scripts run under qemu,
-#                                        # which flies as the user infotrack, then removes
-#                                        # and purges it (about five minutes; not in CI)
+#   --board                              # with --deb: that booted arm64 Debian 12, without
+#                                        # the other tests
 #   --no-opencv                          # without OpenCV: no arm64 root to extract, and a
 #                                        # program that refuses a real camera
 #
@@ -37,7 +39,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-test=false deb=false profile=release opencv=true board_check=false
+test=false deb=false profile=dist opencv=true board_check=false
 while [ $# -gt 0 ]; do
   case "$1" in
     --test) test=true; shift ;;
@@ -52,6 +54,8 @@ if $board_check && ! $deb; then
   echo "build-arm64: --board installs the package: it needs --deb" >&2
   exit 2
 fi
+# The package with OpenCV is tested as on a board (its dependencies are the board's).
+$test && $deb && $opencv && board_check=true
 cannot() { echo "build-arm64: cannot $*" >&2; exit 3; }
 
 target=aarch64-unknown-linux-gnu
@@ -226,28 +230,7 @@ if $deb; then
   package=$(bash scripts/build-deb.sh --arch arm64 --binary "$binary" --onnxruntime "$ort_lib" \
     "${from_root[@]}")
   echo "build-arm64: $package" >&2
-  if $test && $opencv; then
-    # apt installs the package on a fresh arm64 Debian 12 (its dependencies resolved from
-    # this machine's apt sources, as on the board: mmdebstrap, unpacked, no scripts run),
-    # and the program it installed flies from there: its loader, its OpenCV, its ONNX
-    # Runtime, its configs and models.
-    board=$(mktemp -d)
-    # The package at the same path here and inside the new root, where apt reads it.
-    cp "$package" "$board/"
-    printf '%s\n' "$(cat /etc/apt/sources.list.d/*.sources /etc/apt/sources.list 2>/dev/null)" |
-      mmdebstrap --quiet --variant=extract --architectures=arm64 \
-        --setup-hook="mkdir -p \"\$1$board\" && cp $board/$(basename "$package") \"\$1$board/\"" \
-        --include="$board/$(basename "$package")" bookworm "$board/root" - ||
-      { echo "build-arm64: apt could not install $package on arm64 Debian 12" >&2; exit 1; }
-    board_libraries=$(find "$board/root" \( -name 'lib*.so.*' -o -name 'lib*.so' \) -printf '%h\n' |
-      sort -u | paste -sd:)
-    (cd "$board/root/etc/infotrack" && QEMU_LD_PREFIX="$board/root" \
-      qemu_library_path="$board_libraries" ort_lib="" \
-      as_pi4 "$board/root/usr/bin/infotrack" sim --closed-loop --config config/outdoor.toml \
-      --seed 1 --duration 20 --quiet)
-    rm -rf "$board"
-    echo "build-arm64: apt installed the package on arm64 Debian 12; its program flew the outdoor closed loop" >&2
-  elif $test; then
+  if $test && ! $opencv; then
     # What the package installs flies: its program, with the ONNX Runtime and the models
     # and configs it carries, unpacked into a folder (dpkg -x) and run under qemu.
     root=$(mktemp -d)
@@ -259,9 +242,10 @@ if $deb; then
     echo "build-arm64: the package's program flew the outdoor world's closed loop" >&2
     # Installed for real: dpkg -i beside this machine's arm64 libraries in a booted systemd,
     # the unit flying the mock, an upgrade, dpkg -r and -P (tests/install_systemd.rs; the
-    # kernel runs the arm64 program through qemu-user's binfmt_misc handler). Without
-    # OpenCV only: the package with OpenCV needs the arm64 OpenCV, which cannot be installed
-    # beside this machine's amd64 one.
+    # kernel runs the arm64 program through qemu-user's binfmt_misc handler). This package
+    # needs no arm64 library this machine lacks; the one with OpenCV needs the arm64
+    # OpenCV, which cannot be installed beside the amd64 one, so it goes on a booted arm64
+    # Debian 12 instead (below).
     version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
     next=$(bash scripts/build-deb.sh --fast --arch arm64 --binary "$binary" \
       --onnxruntime "$ort_lib" --version "$version+1" --out target/debian-test-arm64)
@@ -274,36 +258,42 @@ if $deb; then
 fi
 
 if $board_check && $deb; then
-  # The package as on a board: apt installs it on an arm64 Debian 12 (mmdebstrap's
-  # `essential` variant, every maintainer script run by the kernel through qemu-user-static,
-  # which needs no library of this machine's inside the root), it flies the outdoor closed
-  # loop as the user its script created, and dpkg removes it (keeping the configs) and
-  # purges it (leaving nothing, the user gone).
-  command -v qemu-aarch64-static >/dev/null || DEBIAN_FRONTEND=noninteractive $SUDO \
-    apt-get install -y -qq --no-install-recommends qemu-user-static >/dev/null ||
-    cannot "install Debian's qemu-user-static"
+  # The package as on a board: an arm64 Debian 12 (mmdebstrap's `essential` variant with
+  # systemd, apt and the package's dependencies) boots with its own systemd as PID 1, every
+  # program of it run by the kernel through qemu-user-static, which needs no library of this
+  # machine's inside the root. There apt installs the package, its unit flies the mock as the
+  # user its script created, an upgrade keeps an edited conffile, and dpkg removes it
+  # (keeping the configs) and purges it (leaving nothing, the user gone):
+  # tests/install_systemd.rs. systemd-binfmt is masked in the root: at boot it would flush
+  # the kernel's handlers, the one running the root's programs among them.
+  # arch-test: mmdebstrap checks with it that this machine runs the root's programs.
+  { command -v qemu-aarch64-static && command -v arch-test; } >/dev/null ||
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends \
+      qemu-user-static arch-test >/dev/null || cannot "install Debian's qemu-user-static and arch-test"
   if [ -e "$handler" ] && ! grep -q 'qemu-aarch64-static' "$handler"; then
     echo "build-arm64: $handler runs arm64 programs with a qemu that needs this machine's libraries; --board needs qemu-aarch64-static there" >&2
     exit 1
   fi
   static_handler=true register_arm64_handler
-  board=$(mktemp -d)
-  cp "$package" "$board/"
+  board=$(mktemp -d /var/tmp/infotrack-board.XXXXXX)
+  depends=$(dpkg-deb -f "$package" Depends | sed 's/ *([^)]*)//g; s/ //g')
   printf '%s\n' "$(cat /etc/apt/sources.list.d/*.sources /etc/apt/sources.list 2>/dev/null)" |
     mmdebstrap --quiet --variant=essential --architectures=arm64 \
-      --setup-hook="mkdir -p \"\$1$board\" && cp $board/$(basename "$package") \"\$1$board/\"" \
-      --include="$board/$(basename "$package")" bookworm "$board/root" -
-  # ONNX Runtime reads the CPU from /proc/cpuinfo: the root has no /proc mounted, so a
-  # Cortex-A72's description is a plain file there.
-  mkdir -p "$board/root/proc"
-  a72_cpuinfo >"$board/root/proc/cpuinfo"
-  chroot --userspec=infotrack:infotrack "$board/root" sh -c 'cd /etc/infotrack &&
-    infotrack sim --closed-loop --config config/outdoor.toml --seed 1 --duration 20 --quiet \
-      --out /var/lib/infotrack/flights/board-check && test -f /var/lib/infotrack/flights/board-check/summary.json'
-  chroot "$board/root" sh -c 'dpkg -r infotrack >/dev/null && ! test -e /usr/bin/infotrack &&
-    test -f /etc/infotrack/config/px4.toml && dpkg -P infotrack >/dev/null &&
-    ! test -e /etc/infotrack && ! test -e /var/lib/infotrack && ! id infotrack 2>/dev/null'
+      --include="systemd,systemd-sysv,dbus,apt,$depends" \
+      --customize-hook='ln -sf /dev/null "$1/etc/systemd/system/systemd-binfmt.service"' \
+      bookworm "$board/root" - || { rm -rf "$board"; exit 1; }
+  version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
+  next=$(bash scripts/build-deb.sh --fast --arch arm64 --binary "$binary" \
+    --onnxruntime "$ort_lib" "${from_root[@]}" --version "$version+1" --out target/debian-test-arm64)
+  # Without QEMU_LD_PREFIX: qemu would look up every path of the booted root in the build's
+  # arm64 root first.
+  (unset PKG_CONFIG_ALLOW_CROSS PKG_CONFIG_SYSROOT_DIR PKG_CONFIG_LIBDIR QEMU_LD_PREFIX
+    INFOTRACK_ARM64_BOARD_ROOT="$board/root" INFOTRACK_ARM64_DEB="$PWD/$package" \
+      INFOTRACK_ARM64_DEB_NEXT="$PWD/$next" \
+      cargo test --release --locked --workspace --test install_systemd -- --ignored --exact \
+      the_arm64_package_installs_flies_upgrades_and_removes_cleanly_on_a_booted_arm64_debian) ||
+    { rm -rf "$board"; unregister_arm64_handler; exit 1; }
   rm -rf "$board"
   unregister_arm64_handler
-  echo "build-arm64: apt installed the package on arm64 Debian 12 with its scripts; it flew as infotrack; removed and purged cleanly" >&2
+  echo "build-arm64: on a booted arm64 Debian 12, apt installed the package, its unit flew, it was upgraded, removed and purged cleanly" >&2
 fi
