@@ -224,6 +224,21 @@ PY
   rm -rf "$flight"
 fi
 
+# The ignored test TEST of tests/install_systemd.rs on the package and on a later version
+# of it (the upgrade), with VAR=VALUE settings added. A host build: the cross build's
+# pkg-config settings are unset, and QEMU_LD_PREFIX too, with which qemu would look up every
+# path of a booted arm64 root in the build's arm64 root first.
+install_test() { # install_test TEST [VAR=VALUE ...]
+  local name=$1 version next
+  shift
+  version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
+  next=$(bash scripts/build-deb.sh --fast --arch arm64 --binary "$binary" \
+    --onnxruntime "$ort_lib" "${from_root[@]}" --version "$version+1" --out target/debian-test-arm64)
+  (unset PKG_CONFIG_ALLOW_CROSS PKG_CONFIG_SYSROOT_DIR PKG_CONFIG_LIBDIR QEMU_LD_PREFIX
+    env "$@" INFOTRACK_ARM64_DEB="$PWD/$package" INFOTRACK_ARM64_DEB_NEXT="$PWD/$next" \
+      cargo test --release --locked --workspace --test install_systemd -- --ignored --exact "$name")
+}
+
 if $deb; then
   from_root=()
   $opencv && from_root=(--sysroot "$sysroot")
@@ -246,13 +261,7 @@ if $deb; then
     # needs no arm64 library this machine lacks; the one with OpenCV needs the arm64
     # OpenCV, which cannot be installed beside the amd64 one, so it goes on a booted arm64
     # Debian 12 instead (below).
-    version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
-    next=$(bash scripts/build-deb.sh --fast --arch arm64 --binary "$binary" \
-      --onnxruntime "$ort_lib" --version "$version+1" --out target/debian-test-arm64)
-    (unset PKG_CONFIG_ALLOW_CROSS PKG_CONFIG_SYSROOT_DIR PKG_CONFIG_LIBDIR
-      INFOTRACK_ARM64_DEB="$PWD/$package" INFOTRACK_ARM64_DEB_NEXT="$PWD/$next" \
-        cargo test --release --locked --workspace --test install_systemd -- --ignored \
-        --exact the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation)
+    install_test the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation
     echo "build-arm64: the package installed, flew the mock under systemd, upgraded and was removed" >&2
   fi
 fi
@@ -276,24 +285,14 @@ if $board_check && $deb; then
   fi
   static_handler=true register_arm64_handler
   board=$(mktemp -d /var/tmp/infotrack-board.XXXXXX)
+  trap 'rm -rf "$board"; unregister_arm64_handler' EXIT
   depends=$(dpkg-deb -f "$package" Depends | sed 's/ *([^)]*)//g; s/ //g')
   printf '%s\n' "$(cat /etc/apt/sources.list.d/*.sources /etc/apt/sources.list 2>/dev/null)" |
     mmdebstrap --quiet --variant=essential --architectures=arm64 \
       --include="systemd,systemd-sysv,dbus,apt,$depends" \
       --customize-hook='ln -sf /dev/null "$1/etc/systemd/system/systemd-binfmt.service"' \
-      bookworm "$board/root" - || { rm -rf "$board"; exit 1; }
-  version=$(sed -n '/^\[workspace.package\]/,/^\[/s/^version = "\(.*\)"/\1/p' Cargo.toml)
-  next=$(bash scripts/build-deb.sh --fast --arch arm64 --binary "$binary" \
-    --onnxruntime "$ort_lib" "${from_root[@]}" --version "$version+1" --out target/debian-test-arm64)
-  # Without QEMU_LD_PREFIX: qemu would look up every path of the booted root in the build's
-  # arm64 root first.
-  (unset PKG_CONFIG_ALLOW_CROSS PKG_CONFIG_SYSROOT_DIR PKG_CONFIG_LIBDIR QEMU_LD_PREFIX
-    INFOTRACK_ARM64_BOARD_ROOT="$board/root" INFOTRACK_ARM64_DEB="$PWD/$package" \
-      INFOTRACK_ARM64_DEB_NEXT="$PWD/$next" \
-      cargo test --release --locked --workspace --test install_systemd -- --ignored --exact \
-      the_arm64_package_installs_flies_upgrades_and_removes_cleanly_on_a_booted_arm64_debian) ||
-    { rm -rf "$board"; unregister_arm64_handler; exit 1; }
-  rm -rf "$board"
-  unregister_arm64_handler
+      bookworm "$board/root" -
+  install_test the_arm64_package_installs_flies_upgrades_and_removes_cleanly_on_a_booted_arm64_debian \
+    INFOTRACK_ARM64_BOARD_ROOT="$board/root"
   echo "build-arm64: on a booted arm64 Debian 12, apt installed the package, its unit flew, it was upgraded, removed and purged cleanly" >&2
 fi

@@ -270,10 +270,7 @@ fn the_arm64_package_installs_flies_upgrades_and_removes_cleanly_under_emulation
     let version = env!("CARGO_PKG_VERSION");
     let m = Machine::boot();
     let handler = Arm64Handler::register(&m);
-    m.must(&format!(
-        "printf '%s' '{CORTEX_A72_CPUINFO}' > /var/tmp/cpuinfo-a72"
-    ));
-    m.must("mount --bind /var/tmp/cpuinfo-a72 /proc/cpuinfo");
+    show_a_cortex_a72(&m);
     install_fly_upgrade_remove(&m, &format!("dpkg -i {first}"), &next, version);
     let arch = m.must(&format!("dpkg-deb -f {first} Architecture"));
     assert_eq!(arch.trim(), "arm64");
@@ -304,15 +301,21 @@ fn the_arm64_package_installs_flies_upgrades_and_removes_cleanly_on_a_booted_arm
     );
     let m = Machine::boot_root(Path::new(&root), 300);
     assert_eq!(m.must("uname -m").trim(), "aarch64", "the booted machine");
-    m.must(&format!(
-        "printf '%s' '{CORTEX_A72_CPUINFO}' > /var/tmp/cpuinfo-a72"
-    ));
-    m.must("mount --bind /var/tmp/cpuinfo-a72 /proc/cpuinfo");
+    show_a_cortex_a72(&m);
     let version = env!("CARGO_PKG_VERSION");
     let install = format!("DEBIAN_FRONTEND=noninteractive apt-get install -y -q {first}");
     install_fly_upgrade_remove(&m, &install, &next, version);
     let linked = m.must("dpkg -s libopencv-core406 | sed -n 's/^Architecture: //p'");
     assert_eq!(linked.trim(), "arm64", "the board's OpenCV");
+}
+
+/// The machine's /proc/cpuinfo made a Raspberry Pi 4's, for ONNX Runtime (emulation leaves
+/// the host's).
+fn show_a_cortex_a72(m: &Machine) {
+    m.must(&format!(
+        "printf '%s' '{CORTEX_A72_CPUINFO}' > /var/tmp/cpuinfo-a72"
+    ));
+    m.must("mount --bind /var/tmp/cpuinfo-a72 /proc/cpuinfo");
 }
 
 /// /proc/cpuinfo of a Raspberry Pi 4 (one Cortex-A72 core is enough for ONNX Runtime).
